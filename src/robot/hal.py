@@ -1,0 +1,130 @@
+"""Hardware abstraction layer: the small interfaces the rescue behaviour talks to.
+
+Backends: simulation ones live in ``ssl_sim`` (MuJoCo robot + acoustic
+simulation), real ones in ``robot.hardware`` (pyserial drive, USB audio
+capture), and file replay in ``robot.replay``. Swapping the backend is the only
+difference between a simulated and a real rescue.
+
+Frames: twists are in the robot (body) frame, +x forward, +y left, +z up;
+wheel quantities follow ``robot.kinematics`` (wheel order and sign).
+"""
+from __future__ import annotations
+
+import time
+from abc import ABC, abstractmethod
+from dataclasses import dataclass, field
+
+import numpy as np
+
+
+@dataclass(frozen=True)
+class AudioBlock:
+    """``samples``: (n_channels, n_samples), int16 or float; ``timestamp``: capture time (s) of the first sample."""
+
+    samples: np.ndarray
+    sample_rate: int
+    timestamp: float
+
+
+class AudioSource(ABC):
+    """A multichannel audio input (e.g. the 8-mic cube array)."""
+
+    @property
+    @abstractmethod
+    def sample_rate(self) -> int: ...
+
+    @property
+    @abstractmethod
+    def n_channels(self) -> int: ...
+
+    @abstractmethod
+    def read(self, n_samples: int) -> AudioBlock:
+        """Block until ``n_samples`` per channel are captured and return them.
+
+        Raises ``EOFError`` when a finite source (a file) is exhausted."""
+
+    def close(self) -> None:  # noqa: B027 - optional hook
+        """Release the device."""
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+@dataclass(frozen=True)
+class WheelOdometry:
+    """Cumulative wheel rotation (rad) and wheel angular speed (rad/s) for the 3 wheels at ``timestamp`` (s)."""
+
+    timestamp: float
+    wheel_angles: np.ndarray
+    wheel_speeds: np.ndarray
+
+
+@dataclass(frozen=True)
+class DriveStatus:
+    """Safety state of the drive base."""
+
+    bumper: bool = False          # a collision/contact is sensed now
+    stalled: bool = False         # wheels commanded but not turning
+    faults: tuple[str, ...] = field(default_factory=tuple)  # e.g. ("watchdog", "overcurrent")
+
+    @property
+    def ok(self) -> bool:
+        return not (self.bumper or self.stalled or self.faults)
+
+
+class DriveBase(ABC):
+    """The omni-drive base."""
+
+    @abstractmethod
+    def set_twist(self, vx: float, vy: float, omega: float) -> None:
+        """Command a body twist (m/s, m/s, rad/s, robot frame); held until changed or stopped."""
+
+    @abstractmethod
+    def stop(self) -> None:
+        """Stop all wheels at once."""
+
+    @abstractmethod
+    def odometry(self) -> WheelOdometry: ...
+
+    @abstractmethod
+    def status(self) -> DriveStatus: ...
+
+    def close(self) -> None:  # noqa: B027 - optional hook
+        """Stop and release the link."""
+
+    def __enter__(self):
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.close()
+
+
+class Clock(ABC):
+    """Time as the behaviour sees it: wall time on hardware, simulated time in simulation."""
+
+    @abstractmethod
+    def now(self) -> float: ...
+
+    @abstractmethod
+    def sleep(self, seconds: float) -> None:
+        """Let ``seconds`` pass (the drive keeps executing its last command)."""
+
+
+class WallClock(Clock):
+    def now(self) -> float:
+        return time.monotonic()
+
+    def sleep(self, seconds: float) -> None:
+        if seconds > 0:
+            time.sleep(seconds)
+
+
+def as_float_audio(samples: np.ndarray) -> np.ndarray:
+    """int16 -> float in [-1, 1); float passes through as float64."""
+    a = np.asarray(samples)
+    if a.dtype == np.int16:
+        return a.astype(np.float64) / 32768.0
+    return a.astype(np.float64, copy=False)
