@@ -43,6 +43,13 @@ class AudioSource(ABC):
 
         Raises ``EOFError`` when a finite source (a file) is exhausted."""
 
+    def flush(self) -> None:  # noqa: B027 - optional hook
+        """Discard audio captured but not yet read (e.g. recorded while driving).
+
+        A live source buffers continuously; the rescue behaviour calls this
+        after stopping so that it listens to fresh, motor-noise-free audio.
+        Finite sources (replay) keep their position: default is a no-op."""
+
     def close(self) -> None:  # noqa: B027 - optional hook
         """Release the device."""
 
@@ -120,6 +127,26 @@ class WallClock(Clock):
     def sleep(self, seconds: float) -> None:
         if seconds > 0:
             time.sleep(seconds)
+
+
+class ManualClock(Clock):
+    """A clock that only moves when told: ``sleep`` advances it at once (replay, tests, dry runs)."""
+
+    def __init__(self, start: float = 0.0) -> None:
+        self._t = float(start)
+
+    def now(self) -> float:
+        return self._t
+
+    def sleep(self, seconds: float) -> None:
+        if seconds > 0:
+            self._t += float(seconds)
+
+    def advance(self, seconds: float) -> None:
+        """Same as ``sleep``: let ``seconds`` (>= 0) pass."""
+        if seconds < 0:
+            raise ValueError(f"seconds must be >= 0, got {seconds}")
+        self._t += float(seconds)
 
 
 def as_float_audio(samples: np.ndarray) -> np.ndarray:
