@@ -1,0 +1,193 @@
+"""SRP-PHAT localizer against independent truth: analytic delays, known source positions."""
+from __future__ import annotations
+
+from dataclasses import replace
+
+import numpy as np
+import pytest
+
+from signals import plane_wave, point_source, speech_like
+from ssl_core.geometry import cube8
+from ssl_core.grid import angular_distance, direction_from_angles
+from ssl_core.localizer import Localizer, LocalizerConfig
+
+FS = 16000
+
+
+def deg_err(d, u) -> float:
+    return float(np.rad2deg(angular_distance(d.direction, u)))
+
+
+@pytest.fixture(scope="module")
+def loc():
+    return Localizer(cube8(), LocalizerConfig())
+
+
+def test_far_field_plane_waves_over_whole_sphere(loc):
+    rng = np.random.default_rng(7)
+    g = cube8()
+    errors = []
+    for k in range(40):
+        # directions spread over the sphere, poles included
+        az = rng.uniform(-np.pi, np.pi)
+        el = np.arcsin(rng.uniform(-1, 1)) if k > 1 else (np.pi / 2 if k == 0 else -np.pi / 2)
+        u = direction_from_angles(az, el)
+        x = 0.1 * plane_wave(g.positions, u, rng.standard_normal(FS // 2), FS)
+        res = loc.locate(x)
+        assert len(res.detections) == 1
+        errors.append(deg_err(res.detections[0], u))
+    assert max(errors) < loc.config.resolution_deg, errors
+
+
+def test_near_field_grid_beats_far_field_at_half_a_metre():
+    g = cube8()
+    rng = np.random.default_rng(3)
+    near = Localizer(g, LocalizerConfig(radius_m=0.5))
+    far = Localizer(g, LocalizerConfig())
+    e_near, e_far = [], []
+    for _ in range(12):
+        u = direction_from_angles(rng.uniform(-np.pi, np.pi), rng.uniform(-1.0, 1.0))
+        x = 0.05 * point_source(g.positions, 0.5 * u, rng.standard_normal(FS // 2), FS)
+        e_near.append(deg_err(near.locate(x).detections[0], u))
+        e_far.append(deg_err(far.locate(x).detections[0], u))
+    assert np.mean(e_near) < np.mean(e_far)
+    assert max(e_near) < 1.5
+
+
+def test_reverberant_room_speech_within_3_degrees():
+    pra = pytest.importorskip("pyroomacoustics")
+    g = cube8()
+    room_dim = np.array([6.0, 5.0, 3.0])
+    e_abs, max_order = pra.inverse_sabine(0.4, room_dim)
+    centre = np.array([2.6, 2.2, 1.2])
+    rng = np.random.default_rng(11)
+    loc = Localizer(g, LocalizerConfig())
+    for az_deg, el_deg in ((30.0, 10.0), (-120.0, -20.0), (160.0, 35.0)):
+        u = direction_from_angles(np.deg2rad(az_deg), np.deg2rad(el_deg))
+        room = pra.ShoeBox(room_dim, fs=FS, materials=pra.Material(e_abs), max_order=min(max_order, 12))
+        room.add_source(centre + 1.5 * u, signal=speech_like(2 * FS, FS, seed=int(az_deg) % 97))
+        room.add_microphone_array((centre + g.positions).T)
+        room.simulate()
+        x = room.mic_array.signals[:, : 2 * FS]
+        rms = np.sqrt(np.mean(x**2))
+        x = x + rng.standard_normal(x.shape) * rms / 10 ** (20 / 20)  # SNR 20 dB
+        res = loc.locate(x)
+        d = res.detections[0]
+        assert abs(np.rad2deg(np.angle(np.exp(1j * (d.azimuth - np.deg2rad(az_deg)))))) <= 3.0
+        assert abs(d.elevation_deg - el_deg) <= 3.0
+
+
+def test_three_simultaneous_speech_sources_found():
+    g = cube8()
+    rng = np.random.default_rng(5)
+    truths = [(-135.0, 35.0), (90.0, 45.0), (150.0, -10.0)]  # at least 30 degrees apart
+    x = np.zeros((8, FS))
+    for k, (az, el) in enumerate(truths):
+        u = direction_from_angles(np.deg2rad(az), np.deg2rad(el))
+        x += 0.05 * plane_wave(g.positions, u, speech_like(FS, FS, seed=100 + k, f0=110 + 40 * k), FS)
+    x += 0.001 * rng.standard_normal(x.shape)
+    loc = Localizer(g, LocalizerConfig(n_sources=3, min_separation_deg=20.0, rel_threshold=0.2, min_power=0.05))
+    res = loc.locate(x)
+    assert len(res.detections) == 3
+    for az, el in truths:
+        u = direction_from_angles(np.deg2rad(az), np.deg2rad(el))
+        assert min(deg_err(d, u) for d in res.detections) <= 5.0
+
+
+def test_three_noise_sources_30_degrees_apart():
+    g = cube8()
+    truths = [(0.0, 0.0), (30.0, 0.0), (-30.0, 10.0)]
+    x = np.zeros((8, FS))
+    for k, (az, el) in enumerate(truths):
+        u = direction_from_angles(np.deg2rad(az), np.deg2rad(el))
+        x += 0.05 * plane_wave(g.positions, u, np.random.default_rng(20 + k).standard_normal(FS), FS)
+    loc = Localizer(g, LocalizerConfig(n_sources=3, min_separation_deg=20.0, rel_threshold=0.2, min_power=0.05))
+    res = loc.locate(x)
+    assert len(res.detections) == 3
+    for az, el in truths:
+        u = direction_from_angles(np.deg2rad(az), np.deg2rad(el))
+        assert min(deg_err(d, u) for d in res.detections) <= 5.0
+
+
+def test_streaming_equals_batch(loc):
+    g = cube8()
+    u = direction_from_angles(1.0, 0.2)
+    x = 0.1 * plane_wave(g.positions, u, speech_like(FS, FS, seed=1), FS)
+    batch = loc.process_all(x)
+    loc.reset()
+    rng = np.random.default_rng(0)
+    stream, pos = [], 0
+    while pos < x.shape[1]:
+        n = int(rng.integers(1, 3000))
+        stream += loc.process(x[:, pos:pos + n])
+        pos += n
+    assert len(batch) == len(stream) == (1 + (FS - 512) // 256) // 8
+    for a, b in zip(batch, stream):
+        assert a.time == pytest.approx(b.time)
+        assert len(a.detections) == len(b.detections)
+        for da, db in zip(a.detections, b.detections):
+            assert da.azimuth == pytest.approx(db.azimuth, abs=1e-9)
+            assert da.elevation == pytest.approx(db.elevation, abs=1e-9)
+            assert da.power == pytest.approx(db.power, rel=1e-4)
+    # window end times step by window_frames * hop / fs
+    assert np.allclose(np.diff([r.time for r in batch]), 8 * 256 / FS)
+
+
+def test_silence_and_incoherent_noise_give_no_detections(loc):
+    assert loc.locate(np.zeros((8, FS))).detections == []
+    noise = np.random.default_rng(2).standard_normal((8, FS)) * 0.01  # independent per mic: no source
+    assert all(r.detections == [] for r in loc.process_all(noise))
+
+
+def test_int16_input_and_beam_level():
+    g = cube8()
+    loc = Localizer(g, LocalizerConfig())
+    u = direction_from_angles(-0.5, 0.1)
+    s = np.random.default_rng(9).standard_normal(FS)
+    x = 0.1 * plane_wave(g.positions, u, s, FS)
+    d16 = loc.locate(np.round(x * 32767).astype(np.int16)).detections[0]
+    assert deg_err(d16, u) < 1.5
+    d_loud = loc.locate(x).detections[0]
+    d_quiet = loc.locate(0.1 * x).detections[0]
+    assert d_loud.level_db - d_quiet.level_db == pytest.approx(20.0, abs=0.1)
+
+
+@pytest.mark.parametrize(
+    "block, match",
+    [
+        (np.zeros((6, 4000)), "6 channels.*expects 8"),
+        (np.zeros(4000), "2-D"),
+        (np.full((8, 4000), np.nan), "non-finite"),
+        (np.zeros((8, 100)), "too short"),
+        (np.zeros((8, 4000), dtype=np.complex64), "dtype"),
+    ],
+)
+def test_bad_input_is_named(loc, block, match):
+    with pytest.raises(ValueError, match=match):
+        loc.locate(block)
+
+
+def test_sample_rate_mismatch(loc):
+    with pytest.raises(ValueError, match="48000 Hz.*16000 Hz"):
+        loc.process(np.zeros((8, 1000)), fs=48000)
+
+
+@pytest.mark.parametrize(
+    "kwargs, field",
+    [
+        (dict(n_sources=3, min_separation_deg=5.0), "min_separation_deg"),
+        (dict(hop=0), "hop"),
+        (dict(resolution_deg=6.0), "resolution_deg"),
+        (dict(band_hz=(3000.0, 300.0)), "band_hz"),
+        (dict(el_min_deg=50.0, el_max_deg=10.0), "elevation"),
+    ],
+)
+def test_bad_config_is_named(kwargs, field):
+    with pytest.raises(ValueError, match=field):
+        Localizer(cube8(), replace(LocalizerConfig(), **kwargs))
+
+
+def test_elevation_limits_respected():
+    loc = Localizer(cube8(), LocalizerConfig(el_min_deg=-10.0, el_max_deg=60.0))
+    assert np.rad2deg(loc.fine_grid.elevation).min() >= -10.0 - 1e-9
+    assert np.rad2deg(loc.coarse_grid.elevation).max() <= 60.0 + 1e-9
