@@ -18,7 +18,7 @@ import numpy as np
 class OmniDriveParams:
     """Geometry and limits of the three-wheel omni drive (SI units)."""
 
-    wheel_radius: float = 0.029          # m (58 mm omni wheels)
+    wheel_radius: float = 0.05           # m (100 mm double-row omni wheels: 2 cm debris, 3.7 cm ground clearance)
     base_radius: float = 0.125           # m, centre to wheel contact
     wheel_angles: tuple[float, float, float] = field(
         default=(np.deg2rad(60.0), np.deg2rad(180.0), np.deg2rad(300.0))
