@@ -39,6 +39,42 @@ def phat_cross_spectra(spectra: np.ndarray, pairs: np.ndarray) -> np.ndarray:
     return cross / np.maximum(mag, np.finfo(mag.dtype).tiny)
 
 
+def phat_normalise(spectra: np.ndarray) -> np.ndarray:
+    """Unit-magnitude spectra ``X / |X|`` (zero bins stay zero)."""
+    mag = np.abs(spectra)
+    return spectra / np.maximum(mag, np.finfo(mag.dtype).tiny)
+
+
+def summed_phat_cross_spectra(spectra: np.ndarray, pairs: np.ndarray) -> np.ndarray:
+    """PHAT cross spectra of every pair summed over frames: ``(channels, frames, bins) -> (pairs, bins)``.
+
+    Since ``X_i X_j* / |X_i X_j*| = (X_i/|X_i|)(X_j/|X_j|)*``, normalising the channels first
+    and summing over frames as one batched matrix product per bin costs far less than
+    forming every pair's per-frame cross spectrum.
+    """
+    y = phat_normalise(spectra).transpose(2, 0, 1)  # (bins, channels, frames)
+    cov = y @ np.conj(y.transpose(0, 2, 1))  # (bins, channels, channels)
+    return cov[:, pairs[:, 0], pairs[:, 1]].T
+
+
+class LagSteering:
+    """GCC at a fixed set of lags straight from band cross spectra, as one real matrix product.
+
+    ``gcc[p, l] = mean_f Re(C[p, f] exp(j w_f tau_l))``: the inverse transform evaluated only at
+    the few lags an array of this size can produce (exact, no interpolation, any lag spacing).
+    A single perfectly coherent path gives 1 at its lag.
+    """
+
+    def __init__(self, omega: np.ndarray, lags: np.ndarray, dtype=np.float32):
+        phase = np.outer(omega, lags)  # (bins, lags)
+        self.matrix = (np.vstack([np.cos(phase), -np.sin(phase)]) / len(omega)).astype(dtype)
+
+    def __call__(self, cross: np.ndarray) -> np.ndarray:
+        """``cross`` (pairs, bins) complex -> (pairs, lags) real."""
+        stacked = np.concatenate([cross.real, cross.imag], axis=-1).astype(self.matrix.dtype, copy=False)
+        return stacked @ self.matrix
+
+
 def gcc_lags(cross: np.ndarray, nfft: int, bins: np.ndarray, upsample: int, max_lag: int) -> np.ndarray:
     """Cross-correlation at lags ``-max_lag..max_lag`` (in 1/(fs*upsample) steps) from band cross spectra.
 

@@ -15,7 +15,7 @@ import numpy as np
 from scipy.ndimage import maximum_filter1d
 from scipy.spatial import cKDTree
 
-from ssl_core.gcc_phat import band_bins, frame_spectra, gcc_lags, phat_cross_spectra
+from ssl_core.gcc_phat import LagSteering, band_bins, frame_spectra, summed_phat_cross_spectra
 from ssl_core.geometry import ArrayGeometry, get_array
 from ssl_core.grid import SphericalGrid, azimuth_elevation, make_grid
 from ssl_core.peaks import local_maxima, neighbour_table
@@ -36,7 +36,7 @@ class LocalizerConfig:
     # frequency: 6 kHz separates talkers 25-30 degrees apart that 3.4 kHz merges. None = all bins.
     band_hz: tuple[float, float] | None = (300.0, 6000.0)
     resolution_deg: float = 1.5           # fine grid spacing
-    coarse_resolution_deg: float = 4.0    # coarse search grid spacing
+    coarse_resolution_deg: float = 5.0    # coarse search grid spacing
     el_min_deg: float = -90.0
     el_max_deg: float = 90.0
     radius_m: float | None = None         # grid radius; None = far field
@@ -131,6 +131,7 @@ class Localizer:
         self._fine = SteeringTable(tdoa_f, cfg.fs, cfg.upsample, self._max_lag)
         self._fine_pos = (tdoa_f * cfg.fs * cfg.upsample).astype(np.float32)  # lag of each fine point, per pair
         self._lag_axis = np.arange(-self._max_lag, self._max_lag + 1, dtype=np.float32)
+        self._lag_steering = LagSteering(self._omega, self._lag_axis / (cfg.fs * cfg.upsample))
         # Masking a found source: half the GCC main lobe, 1 / (2 f_high).
         f_high = cfg.band_hz[1] if cfg.band_hz else cfg.fs / 2
         self._mask_halfwidth = 0.5 * cfg.fs * cfg.upsample / f_high
@@ -151,7 +152,6 @@ class Localizer:
     def reset(self, start_time: float = 0.0) -> None:
         """Forget buffered audio; the next sample is at ``start_time`` (s)."""
         self._buffer = np.zeros((self.geometry.n_mics, 0), dtype=np.float32)
-        self._pending_cross = np.zeros((len(self.pairs), 0, len(self._bins)), dtype=np.complex64)
         self._pending_spec = np.zeros((self.geometry.n_mics, 0, len(self._bins)), dtype=np.complex64)
         self._pending_ms = np.zeros(0)
         self._start_time = float(start_time)
@@ -182,12 +182,12 @@ class Localizer:
             raise ValueError(f"audio contains a non-finite sample (NaN/inf) at channel {ch}, sample {n}")
         return a.astype(np.float32, copy=False)
 
-    def _analyse(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """Band spectra, PHAT cross spectra and band mean squares of every frame of ``x``."""
+    def _analyse(self, x: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Band spectra (channels, frames, bins) and band mean squares (frames,) of every frame of ``x``."""
         cfg = self.config
         spec = frame_spectra(x, cfg.frame_size, cfg.hop, self._window)[..., self._bins]
-        ms = (np.abs(spec) ** 2).sum(axis=-1).mean(axis=0) * self._ms_scale  # (frames,)
-        return spec, phat_cross_spectra(spec, self.pairs), ms
+        ms = (spec.real**2 + spec.imag**2).sum(axis=-1).mean(axis=0) * self._ms_scale
+        return spec, ms
 
     # ------------------------------------------------------------------ public API
     def process(self, block, fs: int | None = None) -> list[LocalizationResult]:
@@ -197,9 +197,8 @@ class Localizer:
         buf = np.concatenate([self._buffer, x], axis=1)
         n_frames = 0 if buf.shape[1] < cfg.frame_size else (buf.shape[1] - cfg.frame_size) // cfg.hop + 1
         if n_frames:
-            spec, cross, ms = self._analyse(buf[:, : (n_frames - 1) * cfg.hop + cfg.frame_size])
+            spec, ms = self._analyse(buf[:, : (n_frames - 1) * cfg.hop + cfg.frame_size])
             self._pending_spec = np.concatenate([self._pending_spec, spec], axis=1)
-            self._pending_cross = np.concatenate([self._pending_cross, cross], axis=1)
             self._pending_ms = np.concatenate([self._pending_ms, ms])
         self._buffer = buf[:, n_frames * cfg.hop:]
         out = []
@@ -207,10 +206,8 @@ class Localizer:
         while self._pending_ms.size >= w:
             self._frames_done += w
             t_end = self._start_time + ((self._frames_done - 1) * cfg.hop + cfg.frame_size) / cfg.fs
-            out.append(self._window_result(self._pending_spec[:, :w], self._pending_cross[:, :w],
-                                           self._pending_ms[:w], t_end))
+            out.append(self._window_result(self._pending_spec[:, :w], self._pending_ms[:w], t_end))
             self._pending_spec = self._pending_spec[:, w:]
-            self._pending_cross = self._pending_cross[:, w:]
             self._pending_ms = self._pending_ms[w:]
         return out
 
@@ -226,9 +223,9 @@ class Localizer:
             raise ValueError(
                 f"recording too short: {x.shape[1]} samples, need at least frame_size={self.config.frame_size}"
             )
-        spec, cross, ms = self._analyse(x)
+        spec, ms = self._analyse(x)
         t_end = ((ms.size - 1) * self.config.hop + self.config.frame_size) / self.config.fs
-        return self._window_result(spec, cross, ms, t_end)
+        return self._window_result(spec, ms, t_end)
 
     def srp_fine(self, result_or_gcc: np.ndarray) -> np.ndarray:
         """SRP power on the whole fine grid for a GCC (pairs, lags) - for plots, not for the hot path."""
@@ -236,9 +233,8 @@ class Localizer:
 
     def window_gcc(self, recording, fs: int | None = None) -> np.ndarray:
         """Window-summed GCC (pairs, lags) of a recording; use with :meth:`srp_fine` for full-resolution maps."""
-        x = self._check(recording, fs)
-        _, cross, ms = self._analyse(x)
-        return self._gcc(cross, self._active(ms))
+        spec, ms = self._analyse(self._check(recording, fs))
+        return self._gcc(spec[:, self._active(ms)])
 
     # ------------------------------------------------------------------ internals
     def _active(self, ms: np.ndarray) -> np.ndarray:
@@ -246,21 +242,19 @@ class Localizer:
             level = 10 * np.log10(ms / _FULL_SCALE_SINE_MS)
         return level >= self.config.min_level_dbfs
 
-    def _gcc(self, cross: np.ndarray, active: np.ndarray) -> np.ndarray:
-        summed = cross[:, active].sum(axis=1) / max(int(active.sum()), 1)
-        gcc = gcc_lags(summed, self.config.frame_size, self._bins, self.config.upsample, self._max_lag)
-        return gcc.astype(np.float32)
+    def _gcc(self, spec: np.ndarray) -> np.ndarray:
+        """Frame-averaged GCC-PHAT (pairs, lags) of band spectra (channels, frames, bins)."""
+        return self._lag_steering(summed_phat_cross_spectra(spec, self.pairs) / max(spec.shape[1], 1))
 
-    def _window_result(self, spec, cross, ms, t_end: float) -> LocalizationResult:
+    def _window_result(self, spec, ms, t_end: float) -> LocalizationResult:
         active = self._active(ms)
         n_active = int(active.sum())
         if n_active == 0:
             return LocalizationResult(t_end, [], np.zeros(self.coarse_grid.n_points), 0)
         level = float(10 * np.log10(ms[active].mean() / _FULL_SCALE_SINE_MS))
-        gcc = self._gcc(cross, active)
-        srp_map, peaks = self._search(gcc)
-        detections = []
         spec_a = spec[:, active]
+        srp_map, peaks = self._search(self._gcc(spec_a))
+        detections = []
         for power, f in peaks:
             u = self.fine_grid.directions[f]
             az, el = azimuth_elevation(u)
@@ -290,7 +284,7 @@ class Localizer:
             # A pooled coarse value bounds the refined power in its cap from above: refine the best
             # few local maxima, skipping those that cannot beat the floor or the best so far.
             best = (-np.inf, -1)
-            for c in local_maxima(coarse, self._neighbours)[:4]:
+            for c in local_maxima(coarse, self._neighbours, top=4):
                 if coarse[c] < max(floor, best[0]):
                     break
                 cols = self._refine[c]
