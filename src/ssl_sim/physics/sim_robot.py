@@ -1,0 +1,236 @@
+"""``SimRobot``: the simulated omni robot in a MuJoCo world, behind a small API.
+
+Commands go in as body twists (robot frame, through ``robot.kinematics.twist_to_wheels``)
+or wheel speeds; physics advances with a fixed timestep; reads give ground-truth pose,
+wheel encoders, IMU, microphone positions (world frame) and collisions.
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+
+import mujoco
+import numpy as np
+
+from robot.hal import WheelOdometry
+from robot.kinematics import OmniDriveParams, twist_to_wheels
+from ssl_sim.physics import robot_model as rm
+from ssl_sim.physics.world_mjcf import FLOOR_GEOM, world_spec
+from ssl_sim.world import World
+
+#: Warnings that mean the simulation is no longer trustworthy.
+_FATAL_WARNINGS = (mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_CNSTRFULL,
+                   mujoco.mjtWarning.mjWARN_CONTACTFULL, mujoco.mjtWarning.mjWARN_INERTIA)
+
+
+class PhysicsError(RuntimeError):
+    """The physics went unstable (NaN, divergence, solver warnings)."""
+
+
+@dataclass(frozen=True)
+class Pose:
+    """Robot base frame in the world: position (m), yaw (rad, about +z) and full orientation quaternion (w, x, y, z)."""
+
+    x: float
+    y: float
+    z: float
+    yaw: float
+    quat: np.ndarray
+
+    @property
+    def rotation(self) -> np.ndarray:
+        m = np.zeros(9)
+        mujoco.mju_quat2Mat(m, self.quat)
+        return m.reshape(3, 3)
+
+    @property
+    def tilt(self) -> float:
+        """Angle (rad) between the robot's +z and the world's +z."""
+        return float(np.arccos(np.clip(self.rotation[2, 2], -1.0, 1.0)))
+
+
+@dataclass(frozen=True)
+class Imu:
+    """IMU at the ``imu`` site: specific force (m/s^2) and angular rate (rad/s) in the sensor (robot) frame,
+    orientation quaternion (w, x, y, z) of the sensor frame in the world."""
+
+    accel: np.ndarray
+    gyro: np.ndarray
+    quat: np.ndarray
+
+
+@dataclass(frozen=True)
+class Contact:
+    """A contact between a robot geom and a world geom that is not the floor."""
+
+    robot_geom: str
+    world_geom: str
+    position: np.ndarray        # world frame, m
+    normal_force: float         # N
+    obstacle: int | None        # index into World.obstacles, None for the room walls
+
+
+class SimRobot:
+    """The robot in ``world`` (``None``: alone on a flat floor), physics step ``timestep`` s."""
+
+    def __init__(self, world: World | None = None, config: rm.RobotModelConfig = rm.RobotModelConfig(),
+                 timestep: float = rm.DEFAULT_TIMESTEP, start: tuple[float, float, float] | None = None,
+                 bumper_threshold: float = 1.0) -> None:
+        if not 0 < timestep <= config.contact_timeconst / 2:
+            raise ValueError(f"timestep: expected 0 < timestep <= contact_timeconst / 2 = {config.contact_timeconst / 2} s "
+                             f"(validated at {rm.DEFAULT_TIMESTEP}), got {timestep}")
+        self.world, self.config = world, config
+        if world is None:
+            spec = rm.robot_spec(config, pose=start or (0.0, 0.0, 0.0), timestep=timestep)
+        else:
+            spec = world_spec(world, config, timestep, robot_pose=start)
+        self.model = spec.compile()
+        self.data = mujoco.MjData(self.model)
+        self.bumper_threshold = float(bumper_threshold)
+        m = self.model
+        self._base = m.body(rm.BASE_BODY).id
+        self._array = m.body(rm.ARRAY_BODY).id
+        self._wheel_qpos = np.array([m.jnt_qposadr[m.joint(j).id] for j in rm.WHEEL_JOINTS])
+        self._wheel_dof = np.array([m.jnt_dofadr[m.joint(j).id] for j in rm.WHEEL_JOINTS])
+        self._mics = np.array([m.site(rm.mic_site(i)).id for i in range(config.array.n_mics)])
+        self._robot_bodies = self._subtree(self._base)
+        self._floor = m.geom(FLOOR_GEOM).id
+        self._sensor = {m.sensor(i).name: slice(m.sensor_adr[i], m.sensor_adr[i] + m.sensor_dim[i])
+                        for i in range(m.nsensor)}
+        mujoco.mj_forward(self.model, self.data)
+
+    # -- set-up ------------------------------------------------------------------------------
+    def _subtree(self, root: int) -> np.ndarray:
+        ids = [b for b in range(self.model.nbody) if self._is_descendant(b, root)]
+        return np.asarray(ids)
+
+    def _is_descendant(self, b: int, root: int) -> bool:
+        while b > 0:
+            if b == root:
+                return True
+            b = int(self.model.body_parentid[b])
+        return False
+
+    @property
+    def params(self) -> OmniDriveParams:
+        return self.config.drive
+
+    @property
+    def timestep(self) -> float:
+        return float(self.model.opt.timestep)
+
+    @property
+    def time(self) -> float:
+        """Simulated time (s) since the start or the last reset."""
+        return float(self.data.time)
+
+    def reset(self) -> None:
+        """Back to the start pose, at rest, time 0."""
+        mujoco.mj_resetData(self.model, self.data)
+        mujoco.mj_forward(self.model, self.data)
+
+    # -- commands -------------------------------------------------------------------------------
+    def set_wheel_speeds(self, wheel_speeds) -> np.ndarray:
+        """Command wheel angular speeds (rad/s, ``robot.kinematics`` order and sign); returns what the
+        motors were given (clipped to the motor limit)."""
+        w = np.asarray(wheel_speeds, float)
+        if w.shape != (3,) or not np.all(np.isfinite(w)):
+            raise ValueError(f"wheel_speeds: expected 3 finite numbers (rad/s), got {wheel_speeds!r}")
+        w = np.clip(w, -self.params.max_wheel_speed, self.params.max_wheel_speed)
+        self.data.ctrl[:3] = w
+        return w
+
+    def set_twist(self, vx: float, vy: float, omega: float) -> np.ndarray:
+        """Command a body twist (m/s, m/s, rad/s, robot frame) through the inverse kinematics with
+        direction-keeping saturation; returns the wheel speeds commanded (rad/s)."""
+        return self.set_wheel_speeds(twist_to_wheels((vx, vy, omega), self.params))
+
+    def stop(self) -> None:
+        self.data.ctrl[:3] = 0.0
+
+    @property
+    def wheel_commands(self) -> np.ndarray:
+        return self.data.ctrl[:3].copy()
+
+    # -- physics -----------------------------------------------------------------------------------
+    def step(self, duration: float | None = None) -> None:
+        """Advance by ``duration`` s (rounded to whole physics steps; one step if None).
+
+        Raises ``PhysicsError`` on NaN state or MuJoCo instability warnings."""
+        n = 1 if duration is None else int(round(duration / self.timestep))
+        if n < 0:
+            raise ValueError(f"duration: expected >= 0 s, got {duration}")
+        if n == 0:
+            return
+        before = self.warning_counts()
+        mujoco.mj_step(self.model, self.data, nstep=n)
+        after = self.warning_counts()
+        grew = {k: after[k] - before[k] for k in after if after[k] > before[k]}
+        if grew or not np.all(np.isfinite(self.data.qpos)):
+            raise PhysicsError(f"physics unstable at t={self.time:.3f} s: warnings {grew or 'none'}, "
+                               f"finite state {bool(np.all(np.isfinite(self.data.qpos)))}")
+
+    def warning_counts(self) -> dict[str, int]:
+        """MuJoCo's cumulative counters of the warnings that invalidate a run."""
+        return {w.name: int(self.data.warning[int(w)].number) for w in _FATAL_WARNINGS}
+
+    # -- state ------------------------------------------------------------------------------------
+    def pose(self) -> Pose:
+        """Ground-truth pose of the robot (base) frame."""
+        q = self.data.xquat[self._base].copy()
+        p = self.data.xpos[self._base]
+        w, x, y, z = q
+        yaw = float(np.arctan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z)))
+        return Pose(float(p[0]), float(p[1]), float(p[2]), yaw, q)
+
+    def body_twist(self) -> np.ndarray:
+        """Ground-truth (vx, vy, omega_z) of the base in its own frame (m/s, m/s, rad/s)."""
+        v = np.zeros(6)
+        mujoco.mj_objectVelocity(self.model, self.data, mujoco.mjtObj.mjOBJ_XBODY, self._base, v, 1)  # XBODY: body frame, not inertial frame
+        return np.array([v[3], v[4], v[2]])
+
+    def wheel_odometry(self) -> WheelOdometry:
+        """Encoders: cumulative wheel angles (rad) and speeds (rad/s), ``robot.kinematics`` order and sign."""
+        return WheelOdometry(timestamp=self.time, wheel_angles=self.data.qpos[self._wheel_qpos].copy(),
+                             wheel_speeds=self.data.qvel[self._wheel_dof].copy())
+
+    def sensor(self, name: str) -> np.ndarray:
+        """Raw reading of a model sensor (``enc_pos0``, ``imu_accel``, ``bumper``, ``motor_torque0``, ...)."""
+        if name not in self._sensor:
+            raise ValueError(f"unknown sensor '{name}': expected one of {sorted(self._sensor)}")
+        return self.data.sensordata[self._sensor[name]].copy()
+
+    def imu(self) -> Imu:
+        return Imu(self.sensor("imu_accel"), self.sensor("imu_gyro"), self.sensor("imu_quat"))
+
+    def mic_positions(self) -> np.ndarray:
+        """World positions of the microphones (n_mics, 3), m, from the model's mic sites."""
+        return self.data.site_xpos[self._mics].copy()
+
+    def array_pose(self) -> tuple[np.ndarray, np.ndarray]:
+        """Array frame in the world: (origin (3,), rotation (3, 3) whose columns are the array axes)."""
+        return self.data.xpos[self._array].copy(), self.data.xmat[self._array].reshape(3, 3).copy()
+
+    def bumper(self) -> bool:
+        """Whether the bumper touch sensor feels more than ``bumper_threshold`` N."""
+        return bool(self.sensor("bumper")[0] > self.bumper_threshold)
+
+    def contacts(self) -> list[Contact]:
+        """Current contacts between the robot and anything but the floor."""
+        m, d = self.model, self.data
+        out = []
+        f6 = np.zeros(6)
+        for k in range(d.ncon):
+            c = d.contact[k]
+            g1, g2 = int(c.geom1), int(c.geom2)
+            r1 = m.geom_bodyid[g1] in self._robot_bodies
+            r2 = m.geom_bodyid[g2] in self._robot_bodies
+            if r1 == r2:
+                continue
+            rg, wg = (g1, g2) if r1 else (g2, g1)
+            if wg == self._floor:
+                continue
+            mujoco.mj_contactForce(m, d, k, f6)
+            name = m.geom(wg).name
+            obstacle = int(name[3:]) if name.startswith("obs") else None
+            out.append(Contact(m.geom(rg).name, name, c.pos.copy(), float(f6[0]), obstacle))
+        return out
