@@ -373,8 +373,9 @@ class RescueBehaviour:
         pool = voiced if (cfg.prefer_voice or cfg.require_voice) and voiced else cands
         loudest = max(pool, key=lambda c: c.energy_db)
         kind = "voice-like source" if pool is voiced else "source (none voice-like)"
-        why = f"loudest {kind}: az {math.degrees(loudest.azimuth):+.0f} deg, {loudest.energy_db:.1f} dB, " \
-              f"voice {loudest.voice:.2f}"
+        rng = f" (~{loudest.range_m:.1f} m)" if loudest.range_m is not None else ""
+        why = f"loudest {kind}: az {math.degrees(loudest.azimuth):+.0f} deg, el {math.degrees(loudest.elevation):+.0f} " \
+              f"deg{rng}, {loudest.energy_db:.1f} dB, voice {loudest.voice:.2f}"
         skipped = [c for c in cands if c not in pool and c.energy_db > loudest.energy_db]
         if skipped:
             why += f"; skipped {len(skipped)} louder non-voice source(s)"

@@ -1,0 +1,215 @@
+"""``ssl-robot``: run the rescue behaviour on the real robot or on a recording.
+
+Real robot:    ssl-robot --serial /dev/ttyUSB0 --audio 2,3 [--channel-map A0,A1,A2,A3,B0,B1,B2,B3]
+Mics only:     ssl-robot --dry-run --audio 2,3            (live audio, motors untouched)
+Replay:        ssl-robot --dry-run --replay REC.wav       (8-channel WAV, simulated ideal drive)
+Devices:       ssl-robot --list-audio
+
+Every decision is printed as it is taken (``--json``: one JSON object per line).
+Ctrl-C stops the robot.
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+import typing
+from dataclasses import fields, replace
+
+from robot.hal import Clock, ManualClock, WallClock
+from robot.rescue import RescueBehaviour, RescueConfig, RescueEvent
+
+PROG = "ssl-robot"
+
+
+def _parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog=PROG, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    drive = p.add_mutually_exclusive_group()
+    drive.add_argument("--serial", metavar="PORT", help="drive MCU serial port (e.g. /dev/ttyUSB0) or pyserial URL")
+    drive.add_argument("--dry-run", action="store_true", help="do not move: log commands, integrate ideal odometry")
+    audio = p.add_mutually_exclusive_group()
+    audio.add_argument("--audio", metavar="DEV_A,DEV_B",
+                       help="the two 4-channel USB microphone devices (index or unique name part; see --list-audio)")
+    audio.add_argument("--replay", metavar="REC.wav", help="multichannel recording instead of live audio")
+    p.add_argument("--list-audio", action="store_true", help="list audio input devices and exit")
+    p.add_argument("--channel-map", default="A0,A1,A2,A3,B0,B1,B2,B3",
+                   help="device channel of each array mic in order, A/B = first/second device (default: %(default)s)")
+    p.add_argument("--calibrate", type=float, default=2.0, metavar="S",
+                   help="seconds of audio at start to measure the offset between the two devices "
+                        "(clap or talk near the robot; 0 = skip) (default: %(default)s)")
+    p.add_argument("--fs", type=int, default=16000, help="sample rate of live capture (Hz) (default: %(default)s)")
+    p.add_argument("--array", default="cube8", help="array preset or .toml/.json geometry (default: %(default)s)")
+    p.add_argument("--sources", type=int, default=3, help="sources localized per listen (default: %(default)s)")
+    p.add_argument("--max-time", type=float, default=600.0, help="mission time limit (s) (default: %(default)s)")
+    p.add_argument("--max-victims", type=int, default=None, help="stop after this many victims")
+    p.add_argument("--realtime", action="store_true", help="with --replay: pace the replay in real time")
+    p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
+                   help="override a RescueConfig field, e.g. --set listen_s=2.0 (repeatable)")
+    p.add_argument("--json", action="store_true", help="print events as JSON lines")
+    p.add_argument("-v", "--verbose", action="store_true", help="debug logging on stderr")
+    return p
+
+
+def _rescue_config(args) -> RescueConfig:
+    cfg = RescueConfig(max_victims=args.max_victims)
+    types = typing.get_type_hints(RescueConfig)
+    known = {f.name for f in fields(RescueConfig)}
+    changes = {}
+    for item in args.set:
+        name, sep, text = item.partition("=")
+        name = name.strip()
+        if not sep or name not in known:
+            raise ValueError(f"--set {item!r}: expected FIELD=VALUE with FIELD one of {sorted(known)}")
+        t = types[name]
+        try:
+            if t is bool:
+                if text.lower() not in ("true", "false", "1", "0", "yes", "no"):
+                    raise ValueError(text)
+                value = text.lower() in ("true", "1", "yes")
+            elif t in (int, float):
+                value = t(text)
+            elif text.lower() == "none":
+                value = None
+            elif "int" in str(t):
+                value = int(text)
+            else:
+                value = tuple(s.strip() for s in text.split(",") if s.strip())
+        except ValueError:
+            raise ValueError(f"--set {name}={text!r}: expected a value of type {t}") from None
+        changes[name] = value
+    return replace(cfg, **changes)
+
+
+def _open_drive(args, clock: Clock):
+    if args.dry_run:
+        from robot.replay import DryRunDrive
+        return DryRunDrive(clock)
+    try:
+        from robot.hardware.serial_drive import SerialDrive
+    except ImportError as exc:
+        raise RuntimeError(f"the serial drive backend is not available ({exc}); pyserial is needed") from exc
+    return SerialDrive(args.serial)
+
+
+def _open_audio(args, clock: Clock, geometry, out):
+    if args.replay:
+        from robot.replay import WavFileSource
+        return WavFileSource(args.replay, expected_channels=geometry.n_mics, clock=clock)
+    from robot.hardware.audio import ArrayCapture, MergeConfig, parse_channel_map
+    devices = [d.strip() for d in args.audio.split(",")]
+    if len(devices) != 2 or not all(devices):
+        raise ValueError(f"--audio {args.audio!r}: expected two devices separated by a comma, e.g. 2,3")
+    cmap = parse_channel_map(args.channel_map)
+    if len(cmap) != geometry.n_mics:
+        raise ValueError(f"--channel-map: {len(cmap)} entries, array '{geometry.name}' has {geometry.n_mics} mics")
+    cap = ArrayCapture(devices, args.fs, MergeConfig(channel_map=cmap), positions=geometry.positions)
+    if args.calibrate > 0:
+        print(f"{PROG}: measuring the offset between the two audio devices for {args.calibrate:g} s: "
+              "clap or talk near the robot", file=out, flush=True)
+        try:
+            est = cap.calibrate(seconds=args.calibrate)
+        except ValueError as exc:
+            est = None
+            print(f"{PROG}: offset calibration needs more audio ({exc}); continuing with offset 0, "
+                  "tracking will correct it", file=out)
+        if est is not None:
+            state = "applied" if est.confident else "NOT applied (not confident: make a louder sound)"
+            print(f"{PROG}: device offset {est} - {state}", file=out, flush=True)
+    return cap
+
+
+def _print_event(e: RescueEvent, as_json: bool, out) -> None:
+    if as_json:
+        data = {k: v for k, v in e.data.items() if k != "candidates"}
+        print(json.dumps({"time": round(e.time, 3), "state": e.state.value, "decision": e.decision,
+                          "reason": e.reason, "data": data}, default=_jsonable), file=out, flush=True)
+    else:
+        print(e, file=out, flush=True)
+
+
+def _jsonable(o):
+    try:
+        return o.tolist()
+    except AttributeError:
+        return str(o)
+
+
+def main(argv: list[str] | None = None, out=None) -> int:
+    out = out or sys.stdout
+    args = _parser().parse_args(argv)
+    logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
+                        format="%(levelname)s %(name)s: %(message)s")
+
+    def fail(msg: str) -> int:
+        print(f"{PROG}: error: {msg}", file=sys.stderr)
+        return 2
+
+    if args.list_audio:
+        from robot.hardware.audio import list_input_devices
+        try:
+            lines = list_input_devices()
+        except ImportError as exc:
+            return fail(str(exc))
+        print("\n".join(lines) or "no audio input devices", file=out)
+        return 0
+    if not (args.serial or args.dry_run):
+        return fail("choose the drive: --serial PORT (real robot) or --dry-run (no motors)")
+    if not (args.audio or args.replay):
+        return fail("choose the audio: --audio DEV_A,DEV_B (live array) or --replay REC.wav")
+    if args.replay and args.serial:
+        return fail("--replay moves nothing real: use it with --dry-run")
+    if args.realtime and not args.replay:
+        return fail("--realtime only applies to --replay")
+
+    from ssl_core.geometry import get_array
+    from ssl_core.localizer import Localizer, LocalizerConfig
+
+    drive = audio = None
+    try:
+        config = _rescue_config(args)
+        geometry = get_array(args.array)
+        clock: Clock = ManualClock() if args.replay and not args.realtime else WallClock()
+        drive = _open_drive(args, clock)
+        audio = _open_audio(args, clock, geometry, out)
+        localizer = Localizer(geometry, LocalizerConfig(fs=audio.sample_rate, n_sources=max(1, args.sources)))
+    except (ValueError, FileNotFoundError, ImportError, OSError, RuntimeError) as exc:
+        for dev in (drive, audio):
+            if dev is not None:
+                dev.close()
+        return fail(str(exc))
+
+    src = args.replay or f"audio devices {args.audio}"
+    drv = "dry run (no motors)" if args.dry_run else f"drive on {args.serial}"
+    print(f"{PROG}: rescue on {src}, {drv}, array {geometry.name}, up to {args.max_time:g} s", file=out, flush=True)
+    behaviour = RescueBehaviour(audio, drive, clock, localizer, config)
+    code = 0
+    try:
+        t_end = clock.now() + args.max_time
+        while not behaviour.done and clock.now() < t_end:
+            for e in behaviour.step():
+                _print_event(e, args.json, out)
+        if not behaviour.done:
+            print(f"{PROG}: mission time of {args.max_time:g} s used up", file=out)
+    except KeyboardInterrupt:
+        print(f"{PROG}: interrupted, robot stopped", file=out)
+        code = 130
+    except Exception as exc:  # the behaviour has stopped the drive already
+        print(f"{PROG}: error: {type(exc).__name__}: {exc} (robot stopped)", file=sys.stderr)
+        code = 1
+    finally:
+        for dev in (drive, audio):
+            try:
+                dev.close()
+            except Exception as exc:
+                print(f"{PROG}: closing {type(dev).__name__} failed: {exc}", file=sys.stderr)
+    if not args.json:
+        print(f"{PROG}: {len(behaviour.victims)} victim(s) found", file=out)
+        for i, v in enumerate(behaviour.victims, 1):
+            print(f"  #{i} at x={v.position[0]:+.2f} m y={v.position[1]:+.2f} m (odometry frame), t={v.time:.1f} s: "
+                  f"{v.criterion}", file=out)
+    return code
+
+
+if __name__ == "__main__":
+    sys.exit(main())

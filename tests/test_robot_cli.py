@@ -1,0 +1,94 @@
+"""``ssl-robot``: replay end to end (real ssl_core localizer, dry-run drive) and clear errors."""
+import io
+import json
+import math
+import sys
+
+import numpy as np
+import pytest
+from scipy.io import wavfile
+
+from robot.cli import main
+from ssl_core.geometry import cube8
+
+FS = 16000
+
+
+@pytest.fixture(scope="module")
+def recording(tmp_path_factory):
+    """3 s, 8 channels: a harmonic 'voice' 2 m away at azimuth +60 deg, 0.2 m below the array, exact delays."""
+    n = 3 * FS
+    rng = np.random.default_rng(4)
+    t = np.arange(n) / FS
+    f0 = 140 * (1 + 0.05 * np.sin(2 * np.pi * 0.5 * t))
+    phase = 2 * np.pi * np.cumsum(f0) / FS
+    s = sum(np.sin(k * phase) / k for k in range(1, 25)) * (0.3 + np.clip(np.sin(2 * np.pi * 3 * t), 0, None))
+    src = np.array([2 * math.cos(math.radians(60)), 2 * math.sin(math.radians(60)), -0.2])
+    r = np.linalg.norm(cube8().positions - src, axis=1)
+    f = np.fft.rfftfreq(n, 1 / FS)
+    x = np.fft.irfft(np.fft.rfft(s)[None] * np.exp(-2j * np.pi * f[None] * (r / 343.0)[:, None]), n) / r[:, None]
+    x += 0.005 * rng.standard_normal(x.shape)
+    p = tmp_path_factory.mktemp("rec") / "rec.wav"
+    wavfile.write(p, FS, (0.2 * x.T / np.abs(x).max() * 32767).astype(np.int16))
+    return p
+
+
+def run(args):
+    out = io.StringIO()
+    code = main(args, out=out)
+    return code, out.getvalue()
+
+
+def test_replay_dry_run_prints_decisions(recording):
+    code, text = run(["--dry-run", "--replay", str(recording), "--max-time", "8"])
+    assert code == 0
+    assert "dry run (no motors)" in text
+    target = next(line for line in text.splitlines() if " target " in line)
+    az = float(target.split("az ")[1].split(" deg")[0])
+    assert az == pytest.approx(60, abs=5)
+    assert "voice-like" in target
+    assert "turn +" in text and "drive step" in text
+
+
+def test_replay_json_lines_until_the_recording_ends(recording):
+    code, text = run(["--dry-run", "--replay", str(recording), "--json", "--max-time", "1000", "--set", "listen_s=1.0"])
+    assert code == 0
+    events = [json.loads(line) for line in text.splitlines() if line.startswith("{")]
+    assert {"time", "state", "decision", "reason", "data"} <= set(events[0])
+    assert events[-1]["decision"] == "audio_ended"  # 3 s of audio = 3 listens of 1 s
+    assert sum(e["decision"] == "heard" for e in events) == 3
+
+
+def test_missing_serial_port_is_a_clear_error(recording, capsys):
+    code, _ = run(["--serial", "/dev/ttyNOPE_ssl_robot", "--audio", "1,2"])
+    assert code == 2
+    err = capsys.readouterr().err
+    assert "/dev/ttyNOPE_ssl_robot" in err and "cannot be opened" in err
+
+
+def test_missing_audio_backend_is_a_clear_error(monkeypatch, capsys):
+    monkeypatch.setitem(sys.modules, "sounddevice", None)  # as on a machine without the hardware extra
+    code, _ = run(["--dry-run", "--audio", "1,2"])
+    assert code == 2
+    assert "pip install 'ssl-rescue[hardware]'" in capsys.readouterr().err
+    code, _ = run(["--list-audio"])
+    assert code == 2
+
+
+def test_bad_arguments_are_named(recording, tmp_path, capsys):
+    assert run(["--replay", str(recording)])[0] == 2
+    assert "--serial PORT" in capsys.readouterr().err
+    assert run(["--dry-run"])[0] == 2
+    assert "--audio" in capsys.readouterr().err
+    assert run(["--serial", "loop://", "--replay", str(recording)])[0] == 2
+    assert "--dry-run" in capsys.readouterr().err
+    assert run(["--dry-run", "--replay", str(recording), "--set", "bogus=1"])[0] == 2
+    assert "bogus" in capsys.readouterr().err
+    assert run(["--dry-run", "--replay", str(recording), "--set", "listen_s=fast"])[0] == 2
+    assert "listen_s" in capsys.readouterr().err
+    four = tmp_path / "four.wav"
+    wavfile.write(four, FS, np.zeros((100, 4), np.int16))
+    assert run(["--dry-run", "--replay", str(four)])[0] == 2
+    assert "has 4 channel(s), expected 8" in capsys.readouterr().err
+    assert run(["--dry-run", "--replay", str(tmp_path / "none.wav")])[0] == 2
+    assert "not found" in capsys.readouterr().err
