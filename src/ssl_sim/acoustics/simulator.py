@@ -1,0 +1,296 @@
+"""The acoustic simulator: what the 8-microphone cube hears in a :class:`~ssl_sim.world.World`.
+
+``AcousticSimulator(world, config).listen(mic_positions_world, duration_s, t0)`` returns the
+ADC output (8, n) for the interval ``[t0, t0 + duration_s)`` of simulation time. Blocks are
+keyed on time: rendering ``[0, 1)`` then ``[1, 2)`` gives exactly the samples of ``[0, 2)``
+at a fixed pose, so consecutive listen steps of a continuing voice are continuous.
+
+Pipeline per listen step:
+1. room impulse responses per (source, microphone) - early part from the image-source model
+   (pyroomacoustics engine on the room + obstacle faces), late part a diffuse tail with the
+   room's Eyring decay (see :mod:`.rir`); cached per pose (positions rounded to 0.1 mm);
+2. each source's time-keyed signal, scaled to its level (Pa at 1 m), convolved (FFT) with its RIRs;
+3. diffuse ambient noise (:mod:`.noise`);
+4. the sensor chain (:mod:`.sensor`): self-noise, gain mismatch, device timing, 16-bit ADC.
+"""
+from __future__ import annotations
+
+import warnings
+from collections import OrderedDict
+from dataclasses import dataclass, field
+from typing import Sequence
+
+import numpy as np
+from scipy import fft as sfft
+
+from ssl_sim.world import World
+
+from .materials import eyring_absorption_for_rt60, uniform_material
+from .noise import AmbientNoise, DiffuseNoiseField
+from .pose import ArrayMount, RobotPose
+from .rir import FRAC_HALF_TAPS, DiffuseTail, early_rir, tail_gain
+from .scene import AcousticScene, ImageSet
+from .sensor import Sensor, SensorConfig
+from .sources import PAPER_LEVEL_DB_SPL, SoundSource, victim_source
+
+
+@dataclass(frozen=True)
+class AcousticConfig:
+    """Simulation settings.
+
+    ``ism_order``: image-source order of the early part (reduced automatically when the obstacle
+    count makes the search cost exceed ``ism_budget``, see ``AcousticScene.max_order_for_budget``).
+    ``late_reverb``: add the diffuse tail (Eyring decay of the room). ``rt60_s``: if set, every
+    surface gets the uniform absorption giving this Eyring RT60 (0 = free field).
+    ``max_rir_s``: RIR length cap (the diffuse tail is truncated there). ``visibility_grid_m``: image-source visibility is evaluated at
+    the array centre snapped to this grid (the 15 cm array shares one visibility set; delays and
+    amplitudes are exact per microphone). ``position_quantum_m``: microphone positions are
+    rounded to this before simulating (cache key). ``victim_*``: defaults for ``world.victims``.
+    """
+
+    fs: int = 16000
+    c: float = 343.0
+    ism_order: int = 3
+    ism_budget: float = 3e7
+    late_reverb: bool = True
+    rt60_s: float | None = None
+    max_rir_s: float = 1.5
+    visibility_grid_m: float = 0.05
+    position_quantum_m: float = 1e-4
+    min_obstacle_extent_m: float = 0.05
+    ambient: AmbientNoise | None = field(default_factory=AmbientNoise)
+    sensor: SensorConfig = field(default_factory=SensorConfig)
+    seed: int = 0
+    rir_cache_size: int = 32
+    victim_sound: str = "calls"
+    victim_level_db_spl: float = PAPER_LEVEL_DB_SPL
+
+    def __post_init__(self) -> None:
+        if self.sensor.fs != self.fs:
+            raise ValueError(f"AcousticConfig.sensor.fs ({self.sensor.fs}) must equal AcousticConfig.fs ({self.fs})")
+        if not 0 <= self.ism_order <= 12:
+            raise ValueError(f"AcousticConfig.ism_order: expected 0..12, got {self.ism_order}")
+        if self.max_rir_s <= 0:
+            raise ValueError(f"AcousticConfig.max_rir_s: expected > 0 s, got {self.max_rir_s}")
+        if self.rt60_s is not None and (not np.isfinite(self.rt60_s) or self.rt60_s < 0):
+            raise ValueError(f"AcousticConfig.rt60_s: expected None or a time >= 0 s, got {self.rt60_s}")
+        if self.position_quantum_m <= 0 or self.visibility_grid_m <= 0:
+            raise ValueError("AcousticConfig.position_quantum_m and visibility_grid_m must be > 0 m")
+
+
+class _PoseRirs:
+    """RIRs (n_sources, n_mics, L) at one pose and their spectra per FFT size."""
+
+    def __init__(self, rirs: np.ndarray) -> None:
+        self.rirs = rirs
+        self.spectra: dict[int, np.ndarray] = {}
+
+    def spectrum(self, n_fft: int) -> np.ndarray:
+        s = self.spectra.get(n_fft)
+        if s is None:
+            s = sfft.rfft(self.rirs, n_fft, axis=-1)
+            self.spectra = {n_fft: s}  # one block size at a time is the normal case
+        return s
+
+
+class AcousticSimulator:
+    """Renders what microphones hear in ``world``; ``sources`` default to the world's victim sites."""
+
+    N_PRE = 256  # RIR samples before the emission instant (see rir.py)
+
+    def __init__(self, world: World, config: AcousticConfig | None = None,
+                 sources: Sequence[SoundSource] | None = None) -> None:
+        self.world = world
+        self.config = cfg = config or AcousticConfig()
+        scene = AcousticScene(world, cfg.min_obstacle_extent_m)
+        if cfg.rt60_s is not None:
+            areas, _ = scene.surface_table()
+            alpha = eyring_absorption_for_rt60(cfg.rt60_s, scene.volume, float(areas.sum()), cfg.c)
+            scene = AcousticScene(world, cfg.min_obstacle_extent_m, material_override=uniform_material(alpha))
+        self.scene = scene
+        self.ism_order = scene.max_order_for_budget(cfg.ism_order, cfg.ism_budget)
+        if self.ism_order < cfg.ism_order:
+            warnings.warn(
+                f"image-source order reduced from {cfg.ism_order} to {self.ism_order}: {len(scene.surfaces)} surfaces "
+                f"({len(scene.obstacle_surfaces)} obstacle faces) exceed ism_budget={cfg.ism_budget:g}",
+                stacklevel=2,
+            )
+        rt = scene.rt60(cfg.c) if cfg.late_reverb else np.zeros(7)
+        self.rt60_bands = np.where(np.isfinite(rt), rt, 1e3)
+        diag = float(np.linalg.norm(scene.size))
+        need = (float(self.rt60_bands.max()) if self.rt60_bands.max() > 0 else 0.0) + 2 * diag / cfg.c
+        if self.rt60_bands.max() > cfg.max_rir_s:
+            warnings.warn(
+                f"room RT60 up to {self.rt60_bands.max():.2f} s exceeds max_rir_s={cfg.max_rir_s} s: "
+                "the reverberant tail is truncated", stacklevel=2)
+        self.rir_length = self.N_PRE + int(np.ceil(min(need, cfg.max_rir_s) * cfg.fs))
+        self._sensors: dict[int, Sensor] = {}
+        self._images: OrderedDict[tuple, ImageSet] = OrderedDict()
+        self._tails: dict[int, list[tuple[np.ndarray, DiffuseTail]]] = {}
+        self._rirs: OrderedDict[bytes, _PoseRirs] = OrderedDict()
+        self._sources: list[SoundSource] = []
+        if sources is None:
+            sources = [victim_source(v, i, seed=cfg.seed, fs=cfg.fs, sound=cfg.victim_sound,
+                                     level_db_spl=cfg.victim_level_db_spl) for i, v in enumerate(world.victims)]
+        for s in sources:
+            self.add_source(s)
+        self.ambient = DiffuseNoiseField(cfg.ambient, cfg.fs, cfg.seed, cfg.c) if cfg.ambient is not None else None
+
+    # ------------------------------------------------------------------ sources
+    @property
+    def sources(self) -> tuple[SoundSource, ...]:
+        return tuple(self._sources)
+
+    def add_source(self, source: SoundSource) -> int:
+        """Add a source (validated to be in the room's air); returns its index."""
+        if not isinstance(source, SoundSource):
+            raise ValueError(f"source: expected a SoundSource, got {type(source).__name__}")
+        i = len(self._sources)
+        self.scene.check_point(source.position, f"sources[{i}].position ({source.name or source.kind})")
+        if source.signal.fs != self.config.fs:
+            raise ValueError(f"sources[{i}].signal.fs: {source.signal.fs} Hz differs from the simulation rate {self.config.fs} Hz")
+        self._sources.append(source)
+        self._rirs.clear()
+        return i
+
+    # ------------------------------------------------------------------ impulse responses
+    def _quantise(self, p: np.ndarray, q: float) -> np.ndarray:
+        return np.round(np.asarray(p, float) / q) * q
+
+    def _image_set(self, k: int, centre: np.ndarray) -> tuple[ImageSet, float]:
+        cfg = self.config
+        src = np.asarray(self._sources[k].position)
+        if self.scene.is_shoebox:
+            recv = None  # every image is visible everywhere in a shoebox
+        else:
+            grid = self._quantise(centre, cfg.visibility_grid_m)
+            recv = grid if self.scene.inside_air(grid, margin=0.005) else centre
+        key = (k, None if recv is None else tuple(np.round(recv, 6)))
+        imgs = self._images.get(key)
+        if imgs is not None:
+            self._images.move_to_end(key)
+        else:
+            ref = self.scene.size / 2 if recv is None else recv
+            imgs = self.scene.image_sources(src, ref, self.ism_order, cfg.c)
+            self._images[key] = imgs
+            if len(self._images) > 512:
+                self._images.popitem(last=False)
+        first_missing = self.scene.first_missing_distance(src, centre, self.ism_order, cfg.c) if cfg.late_reverb else np.inf
+        return imgs, first_missing
+
+    def _tail(self, k: int, mics: np.ndarray) -> DiffuseTail:
+        # Rigid array: one tail per source serves every pose (matched on inter-mic distances within 2 mm).
+        d = np.linalg.norm(mics[:, None] - mics[None], axis=-1)
+        for dk, t in self._tails.get(k, []):
+            if dk.shape == d.shape and np.allclose(dk, d, atol=2e-3):
+                return t
+        cfg = self.config
+        rng = np.random.default_rng([cfg.seed & 0xFFFFFFFF, 0x7A11, k])
+        t = DiffuseTail(self.rt60_bands, self.scene.volume, cfg.fs, cfg.c, self.rir_length - self.N_PRE, rng, mics)
+        self._tails.setdefault(k, []).append((d, t))
+        return t
+
+    def impulse_responses(self, mic_positions_world) -> np.ndarray:
+        """RIRs (n_sources, n_mics, rir_length) in Pa per (Pa at 1 m); index 0 is ``N_PRE`` samples before emission."""
+        mics = self._check_mics(mic_positions_world)
+        return self._pose_rirs(mics).rirs
+
+    def _pose_rirs(self, mics: np.ndarray) -> _PoseRirs:
+        cfg = self.config
+        mics = self._quantise(mics, cfg.position_quantum_m)
+        key = mics.tobytes()
+        hit = self._rirs.get(key)
+        if hit is not None:
+            self._rirs.move_to_end(key)
+            return hit
+        centre = mics.mean(axis=0)
+        L, n_pre = self.rir_length, self.N_PRE
+        out = np.zeros((len(self._sources), mics.shape[0], L))
+        for k, src in enumerate(self._sources):
+            imgs, first_missing = self._image_set(k, centre)
+            if imgs.positions.shape[0]:
+                d_max = float(np.max(np.linalg.norm(imgs.positions - centre, axis=1))) + 0.2
+                l_early = min(L, n_pre + int(np.ceil(d_max / cfg.c * cfg.fs)) + FRAC_HALF_TAPS + 2 * n_pre)
+                out[k, :, :l_early] = early_rir(imgs.positions, imgs.reflection, mics, cfg.fs, cfg.c, n_pre, l_early)
+            if cfg.late_reverb and self.rt60_bands.max() > 0:
+                tail = self._tail(k, mics)
+                start = int(round(first_missing / cfg.c * cfg.fs)) if np.isfinite(first_missing) else L
+                g = tail_gain(out[k, :, n_pre:], tail.expected_energy, start, cfg.fs)
+                out[k, :, n_pre:] += g * tail.tail
+            resp = src.burial_response(np.fft.rfftfreq(sfft.next_fast_len(L), 1.0 / cfg.fs))
+            if resp is not None:
+                n_fft = sfft.next_fast_len(L)
+                out[k] = sfft.irfft(sfft.rfft(out[k], n_fft, axis=-1) * resp, n_fft, axis=-1)[:, :L]
+        pr = _PoseRirs(out)
+        self._rirs[key] = pr
+        if len(self._rirs) > cfg.rir_cache_size:
+            self._rirs.popitem(last=False)
+        return pr
+
+    # ------------------------------------------------------------------ rendering
+    def _check_mics(self, mic_positions_world) -> np.ndarray:
+        mics = np.asarray(mic_positions_world, float)
+        if mics.ndim != 2 or mics.shape[1] != 3 or mics.shape[0] < 1:
+            raise ValueError(f"mic_positions_world: expected shape (n_mics, 3) in world metres, got {mics.shape}")
+        for i, p in enumerate(mics):
+            self.scene.check_point(p, f"mic_positions_world[{i}]", margin=0.005)
+        return mics
+
+    def pressure(self, mic_positions_world, n0: int, n: int, channels: Sequence[int] | None = None,
+                 include_sources: bool = True, include_ambient: bool = True) -> np.ndarray:
+        """Sound pressure (len(channels), n) in Pa at the microphones for absolute samples ``n0 .. n0+n-1``
+        (no sensor effects). ``channels`` selects microphones (default all)."""
+        cfg = self.config
+        mics = self._check_mics(mic_positions_world)
+        ch = np.arange(mics.shape[0]) if channels is None else np.asarray(channels, int)
+        n0, n = int(n0), int(n)
+        out = np.zeros((ch.size, n))
+        if include_sources and self._sources:
+            pr = self._pose_rirs(mics)
+            L = self.rir_length
+            n_fft = sfft.next_fast_len(n + L - 1)
+            H = pr.spectrum(n_fft)[:, ch, :]  # (S, C, F)
+            Y = np.zeros((ch.size, n_fft // 2 + 1), complex)
+            for k, src in enumerate(self._sources):
+                seg = src.signal.render(n0 + self.N_PRE - L + 1, n + L - 1) * src.pressure_at_1m
+                Y += H[k] * sfft.rfft(seg, n_fft)[None, :]
+            out += sfft.irfft(Y, n_fft, axis=-1)[:, L - 1: L - 1 + n]
+        if include_ambient and self.ambient is not None:
+            out += self.ambient.render(mics, n0, n)[ch]
+        return out
+
+    def _sensor(self, n_mics: int) -> Sensor:
+        s = self._sensors.get(n_mics)
+        if s is None:
+            s = self._sensors[n_mics] = Sensor(self.config.sensor, n_mics, self.config.seed)
+        return s
+
+    def listen(self, mic_positions_world, duration_s: float, t0: float = 0.0) -> np.ndarray:
+        """ADC output (n_mics, n) for simulation time ``[t0, t0 + duration_s)``, ``n = round(duration_s * fs)``:
+        int16 (default) or float32 per ``config.sensor.output``. ``mic_positions_world`` (n_mics, 3) m."""
+        cfg = self.config
+        if not np.isfinite(duration_s) or duration_s <= 0:
+            raise ValueError(f"duration_s: expected a duration > 0 s, got {duration_s}")
+        if not np.isfinite(t0):
+            raise ValueError(f"t0: expected a finite time in s, got {t0}")
+        mics = self._check_mics(mic_positions_world)
+        n0, n = int(round(t0 * cfg.fs)), int(round(duration_s * cfg.fs))
+        sensor = self._sensor(mics.shape[0])
+        timing = sensor.device_timing(n0, n)
+        p = np.zeros((mics.shape[0], n))
+        offsets = {float(t[0] - n0) for _, t in timing}
+        if sensor.timing_exact() and len(offsets) == 1:
+            p = self.pressure(mics, n0 + int(offsets.pop()), n)
+        else:
+            h = Sensor.HALF_TAPS
+            for chans, times in timing:
+                a = int(np.floor(times.min())) - h - 1
+                b = int(np.ceil(times.max())) + h + 2
+                pch = self.pressure(mics, a, b - a, channels=chans)
+                p[list(chans)] = Sensor.interpolate(pch, a, times)
+        return sensor.digitise(p, n0)
+
+    def listen_pose(self, pose: RobotPose, duration_s: float, t0: float = 0.0, mount: ArrayMount | None = None) -> np.ndarray:
+        """:meth:`listen` with microphones placed by the robot ``pose`` and array ``mount``."""
+        mount = mount or ArrayMount()
+        return self.listen(mount.mic_positions_world(pose), duration_s, t0)
