@@ -155,7 +155,7 @@ def test_finds_victims_loudest_first_and_moves_on():
     found = [e for e in ev if e.decision == "victim_found"]
     assert len(found) == 2
     # loudest first, then the other one; estimated positions near the truth
-    for e, v in zip(found, (victims[1], victims[0])):
+    for e, v in zip(found, (victims[1], victims[0]), strict=True):
         assert math.dist(e.data["position"], v.position[:2]) < 0.3
         assert "elevation" in e.reason or "bumped" in e.reason
     # after the first find, the first victim's detections were ignored as already found
@@ -391,3 +391,43 @@ def test_config_errors_name_the_field():
     w = World([])
     with pytest.raises(ValueError, match="geometry: 8 microphones but the audio source has 4"):
         make(w, audio=FakeAudio(w.clock, n_channels=4), geometry=cube8())
+
+
+def test_listening_takes_the_block_duration_even_if_the_source_does_not():
+    w = World([])
+
+    class Instant(FakeAudio):
+        def read(self, n):
+            return AudioBlock(np.zeros((8, n), np.int16), FS, self.clock.now())
+
+    b = make(w, RescueConfig(settle_s=0.0, listen_s=0.5), audio=Instant(w.clock))
+    t0 = w.clock.now()
+    b.step()
+    assert w.clock.now() - t0 == pytest.approx(0.5)
+
+
+# --- robot.voice -------------------------------------------------------------------
+
+def test_voice_likeness_separates_voice_from_noise_hum_and_high_tones():
+    from robot.voice import voice_likeness
+    rng = np.random.default_rng(0)
+    t = np.arange(FS) / FS
+    for f0, seed in ((90, 1), (130, 2), (220, 3)):
+        assert voice_likeness(_voice(FS, seed, f0), FS).score > 0.6
+    assert voice_likeness(rng.standard_normal(FS), FS).score < 0.1                       # white noise
+    assert voice_likeness(np.cumsum(rng.standard_normal(FS)), FS).score < 0.1            # rumble
+    assert voice_likeness(np.sin(2 * np.pi * 100 * t), FS).score < 0.1                   # mains/motor hum
+    assert voice_likeness(np.sin(2 * np.pi * 2000 * t), FS).score < 0.1                 # beeper above the pitch band
+    assert voice_likeness(np.zeros(FS), FS).score == 0.0
+
+
+def test_beam_toward_a_plane_wave_recovers_it_and_attenuates_other_directions():
+    from robot.voice import beamform
+    rng = np.random.default_rng(1)
+    s = rng.standard_normal(FS)
+    u = np.array([math.cos(0.4) * math.cos(-0.3), math.sin(0.4) * math.cos(-0.3), math.sin(-0.3)])
+    x = _plane(u, s)
+    err = beamform(x, cube8().positions, u, FS) - s
+    assert np.sqrt(np.mean(err**2)) < 0.01  # exact but for the Nyquist bin, where a fractional delay is lossy
+    off = beamform(x, cube8().positions, -u, FS)
+    assert np.mean(off**2) < 0.5 * np.mean(s**2)  # broadband noise from the opposite side loses > 3 dB

@@ -205,8 +205,9 @@ class RescueBehaviour:
     detection for the voice score; give ``geometry`` explicitly otherwise.
     """
 
-    def __init__(self, audio: AudioSource, drive: DriveBase, clock: Clock, localizer, config: RescueConfig = RescueConfig(),
-                 *, params: OmniDriveParams = OmniDriveParams(), start_pose=(0.0, 0.0, 0.0), geometry=None) -> None:
+    def __init__(self, audio: AudioSource, drive: DriveBase, clock: Clock, localizer,
+                 config: RescueConfig = RescueConfig(), *, params: OmniDriveParams = OmniDriveParams(),
+                 start_pose=(0.0, 0.0, 0.0), geometry=None) -> None:
         self.audio, self.drive, self.clock, self.localizer, self.config = audio, drive, clock, localizer, config
         geometry = geometry if geometry is not None else getattr(localizer, "geometry", None)
         self._mic_positions = None if geometry is None else np.asarray(getattr(geometry, "positions", geometry), float)
@@ -318,7 +319,13 @@ class RescueBehaviour:
         self.clock.sleep(cfg.settle_s)
         self.audio.flush()
         n = max(1, int(round(cfg.listen_s * self.audio.sample_rate)))
+        t0 = self.clock.now()
         block = self.audio.read(n)
+        # Listening takes the block's duration of clock time. Live and simulated sources let it pass
+        # themselves; for one that does not (a file without a clock) let it pass here, standing still.
+        lag = n / self.audio.sample_rate - (self.clock.now() - t0)
+        if lag > 1e-9:
+            self.clock.sleep(lag)
         result = self.localizer.locate(block.samples)
         self._update_odometry()
         dets = list(getattr(result, "detections", []) or [])
@@ -374,8 +381,9 @@ class RescueBehaviour:
         loudest = max(pool, key=lambda c: c.energy_db)
         kind = "voice-like source" if pool is voiced else "source (none voice-like)"
         rng = f" (~{loudest.range_m:.1f} m)" if loudest.range_m is not None else ""
-        why = f"loudest {kind}: az {math.degrees(loudest.azimuth):+.0f} deg, el {math.degrees(loudest.elevation):+.0f} " \
-              f"deg{rng}, {loudest.energy_db:.1f} dB, voice {loudest.voice:.2f}"
+        why = f"loudest {kind}: az {math.degrees(loudest.azimuth):+.0f} deg, " \
+              f"el {math.degrees(loudest.elevation):+.0f} deg{rng}, {loudest.energy_db:.1f} dB, " \
+              f"voice {loudest.voice:.2f}"
         skipped = [c for c in cands if c not in pool and c.energy_db > loudest.energy_db]
         if skipped:
             why += f"; skipped {len(skipped)} louder non-voice source(s)"

@@ -109,7 +109,8 @@ class MergeConfig:
         if not 0 <= self.band_hz[0] < self.band_hz[1]:
             raise ValueError(f"band_hz: expected (low, high) Hz with 0 <= low < high, got {self.band_hz}")
         if not self.history_s > 2 * self.max_offset_s:
-            raise ValueError(f"history_s: expected > 2 * max_offset_s = {2 * self.max_offset_s} s, got {self.history_s}")
+            raise ValueError(
+                f"history_s: expected > 2 * max_offset_s = {2 * self.max_offset_s} s, got {self.history_s}")
 
 
 @dataclass(frozen=True)
@@ -435,7 +436,8 @@ class ArrayCapture(AudioSource):
         self._count = [0, 0]
         self._lock = threading.Lock()
         self._since_track = 0
-        idx = [_resolve_device(self._sd, spec, config.device_channels[d], sample_rate) for d, spec in enumerate(devices)]
+        idx = [_resolve_device(self._sd, spec, config.device_channels[d], sample_rate)
+               for d, spec in enumerate(devices)]
         self._streams = []
         try:
             for d in (0, 1):
