@@ -45,6 +45,7 @@ ARRAY_BODY = "array"
 IMU_SITE = "imu"
 BUMPER_SITE = "bumper"
 BUMPER_GEOM = "bumper"
+BUMPER_TRAVEL = 0.002  # m: the bumper switch closes this close to an obstacle
 WHEEL_JOINTS = ("wheel0", "wheel1", "wheel2")
 WHEEL_ACTUATORS = ("motor0", "motor1", "motor2")
 
@@ -176,8 +177,8 @@ def add_robot(spec: mujoco.MjSpec, cfg: RobotModelConfig = RobotModelConfig(),
     # Bumper band: outermost part of the robot in plan view; the touch sensor site wraps it.
     zb0, zb1 = cfg.bumper_z
     _robot_geom(base, cfg, name=BUMPER_GEOM, type=mujoco.mjtGeom.mjGEOM_CYLINDER,
-                size=[cfg.bumper_radius, (zb1 - zb0) / 2, 0], pos=[0, 0, (zb0 + zb1) / 2], mass=cfg.bumper_mass,
-                rgba=[0.9, 0.6, 0.1, 0.35], friction=[cfg.chassis_friction, 0.005, 0.0001])
+                size=[cfg.bumper_radius, (zb1 - zb0) / 2, 0], pos=[0, 0, (zb0 + zb1) / 2],
+                mass=cfg.bumper_mass, rgba=[0.9, 0.6, 0.1, 0.35], friction=[cfg.chassis_friction, 0.005, 0.0001])
     base.add_site(name=BUMPER_SITE, type=mujoco.mjtGeom.mjGEOM_CYLINDER,
                   size=[cfg.bumper_radius + 0.01, (zb1 - zb0) / 2 + 0.01, 0], pos=[0, 0, (zb0 + zb1) / 2],
                   rgba=[1, 0, 0, 0.1], group=4)

@@ -338,3 +338,27 @@ def generate_world(cfg: RubbleConfig = RubbleConfig(), seed: int = 0, name: str 
             return world
     raise RuntimeError(f"generate_world: no valid scene after {cfg.max_attempts} attempts with seed {seed}; "
                        "lower block_coverage / counts or enlarge room_size")
+
+
+#: Named scenes: generator preset and seed (``empty_lab`` is built by hand).
+NAMED_SEEDS = {"light_rubble": 11, "dense_collapsed_room": 7}
+
+
+def empty_lab() -> World:
+    """The paper's lab set-up: an empty room, the robot in the middle facing +x, one talker
+    1.5 m away at -4 degrees azimuth with the mouth at 0.3 m."""
+    room = Room(size=(7.0, 6.0, 3.0), wall_material="brickwork", floor_material="concrete_floor",
+                ceiling_material="plasterboard")
+    start = (3.0, 3.0, 0.0)
+    az = np.deg2rad(-4.0)
+    victim = VictimSite((_r(start[0] + 1.5 * np.cos(az)), _r(start[1] + 1.5 * np.sin(az)), 0.3), buried=0.0)
+    return World(room=room, victims=(victim,), robot_start=start, name="empty_lab")
+
+
+def named_scene(name: str) -> World:
+    """Build a named scene from its recipe (the shipped TOML files are these, written by ``scenes``)."""
+    if name == "empty_lab":
+        return empty_lab()
+    if name in NAMED_SEEDS:
+        return generate_world(PRESETS[name], seed=NAMED_SEEDS[name], name=name)
+    raise ValueError(f"unknown named scene '{name}': expected one of {['empty_lab', *NAMED_SEEDS]}")

@@ -73,3 +73,4 @@ def load_scene(name_or_path: str | Path) -> World:
     except tomllib.TOMLDecodeError as exc:
         raise ValueError(f"scene file {p}: invalid TOML ({exc})") from exc
     return World.from_dict(data)
+

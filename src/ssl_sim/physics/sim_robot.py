@@ -18,8 +18,9 @@ from ssl_sim.physics.world_mjcf import FLOOR_GEOM, world_spec
 from ssl_sim.world import World
 
 #: Warnings that mean the simulation is no longer trustworthy.
-_FATAL_WARNINGS = (mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_CNSTRFULL,
-                   mujoco.mjtWarning.mjWARN_CONTACTFULL, mujoco.mjtWarning.mjWARN_INERTIA)
+_FATAL_WARNINGS = (mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL,
+                   mujoco.mjtWarning.mjWARN_CNSTRFULL, mujoco.mjtWarning.mjWARN_CONTACTFULL,
+                   mujoco.mjtWarning.mjWARN_INERTIA)
 
 
 class PhysicsError(RuntimeError):
@@ -94,8 +95,13 @@ class SimRobot:
         self._mics = np.array([m.site(rm.mic_site(i)).id for i in range(config.array.n_mics)])
         self._robot_bodies = self._subtree(self._base)
         self._floor = m.geom(FLOOR_GEOM).id
+        self._bumper = m.geom(rm.BUMPER_GEOM).id
+        # Static geoms the bumper can meet: everything of the world's but the floor and small debris.
+        self._bumper_targets = [g for g in range(m.ngeom) if m.geom_bodyid[g] not in self._robot_bodies
+                                and g != self._floor and m.geom_contype[g] & rm.WORLD_CONTYPE]
         self._sensor = {m.sensor(i).name: slice(m.sensor_adr[i], m.sensor_adr[i] + m.sensor_dim[i])
                         for i in range(m.nsensor)}
+        self._stale = False
         mujoco.mj_forward(self.model, self.data)
 
     # -- set-up ------------------------------------------------------------------------------
@@ -127,6 +133,7 @@ class SimRobot:
         """Back to the start pose, at rest, time 0."""
         mujoco.mj_resetData(self.model, self.data)
         mujoco.mj_forward(self.model, self.data)
+        self._stale = False
 
     # -- commands -------------------------------------------------------------------------------
     def set_wheel_speeds(self, wheel_speeds) -> np.ndarray:
@@ -163,6 +170,8 @@ class SimRobot:
             return
         before = self.warning_counts()
         mujoco.mj_step(self.model, self.data, nstep=n)
+        # mj_step leaves positions, sensors and contacts one step behind the state; refresh on first read.
+        self._stale = True
         after = self.warning_counts()
         grew = {k: after[k] - before[k] for k in after if after[k] > before[k]}
         if grew or not np.all(np.isfinite(self.data.qpos)):
@@ -173,9 +182,14 @@ class SimRobot:
         """MuJoCo's cumulative counters of the warnings that invalidate a run."""
         return {w.name: int(self.data.warning[int(w)].number) for w in _FATAL_WARNINGS}
 
-    # -- state ------------------------------------------------------------------------------------
+    # -- state (all reads are at ``time``) ------------------------------------------------------------
+    def _sync(self) -> None:
+        if self._stale:
+            mujoco.mj_forward(self.model, self.data)
+            self._stale = False
     def pose(self) -> Pose:
         """Ground-truth pose of the robot (base) frame."""
+        self._sync()
         q = self.data.xquat[self._base].copy()
         p = self.data.xpos[self._base]
         w, x, y, z = q
@@ -184,6 +198,7 @@ class SimRobot:
 
     def body_twist(self) -> np.ndarray:
         """Ground-truth (vx, vy, omega_z) of the base in its own frame (m/s, m/s, rad/s)."""
+        self._sync()
         v = np.zeros(6)
         mujoco.mj_objectVelocity(self.model, self.data, mujoco.mjtObj.mjOBJ_XBODY, self._base, v, 1)  # XBODY: body frame, not inertial frame
         return np.array([v[3], v[4], v[2]])
@@ -197,6 +212,7 @@ class SimRobot:
         """Raw reading of a model sensor (``enc_pos0``, ``imu_accel``, ``bumper``, ``motor_torque0``, ...)."""
         if name not in self._sensor:
             raise ValueError(f"unknown sensor '{name}': expected one of {sorted(self._sensor)}")
+        self._sync()
         return self.data.sensordata[self._sensor[name]].copy()
 
     def imu(self) -> Imu:
@@ -204,18 +220,36 @@ class SimRobot:
 
     def mic_positions(self) -> np.ndarray:
         """World positions of the microphones (n_mics, 3), m, from the model's mic sites."""
+        self._sync()
         return self.data.site_xpos[self._mics].copy()
 
     def array_pose(self) -> tuple[np.ndarray, np.ndarray]:
         """Array frame in the world: (origin (3,), rotation (3, 3) whose columns are the array axes)."""
+        self._sync()
         return self.data.xpos[self._array].copy(), self.data.xmat[self._array].reshape(3, 3).copy()
 
     def bumper(self) -> bool:
-        """Whether the bumper touch sensor feels more than ``bumper_threshold`` N."""
-        return bool(self.sensor("bumper")[0] > self.bumper_threshold)
+        """Whether the bumper switch is closed: the bumper band is within its travel
+        (``robot_model.BUMPER_TRAVEL``) of a wall or big obstacle, or its touch sensor feels more than
+        ``bumper_threshold`` N. Distance, not force alone: pressed against a wall the slipping wheels
+        make the contact chatter at sub-millimetre scale and the force flicker."""
+        self._sync()
+        if self.sensor("bumper")[0] > self.bumper_threshold:
+            return True
+        m, d = self.model, self.data
+        centre = d.geom_xpos[self._bumper]
+        reach = m.geom_rbound[self._bumper] + rm.BUMPER_TRAVEL
+        for g in self._bumper_targets:
+            if m.geom_type[g] != mujoco.mjtGeom.mjGEOM_PLANE and \
+                    np.linalg.norm(d.geom_xpos[g] - centre) > reach + m.geom_rbound[g]:
+                continue  # bounding spheres apart
+            if mujoco.mj_geomDistance(m, d, self._bumper, g, rm.BUMPER_TRAVEL, None) < rm.BUMPER_TRAVEL:
+                return True
+        return False
 
     def contacts(self) -> list[Contact]:
         """Current contacts between the robot and anything but the floor."""
+        self._sync()
         m, d = self.model, self.data
         out = []
         f6 = np.zeros(6)
