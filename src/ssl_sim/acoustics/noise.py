@@ -6,6 +6,7 @@ incoherent at high frequencies), which is what makes background noise hard for G
 """
 from __future__ import annotations
 
+from collections import OrderedDict
 from dataclasses import dataclass
 
 import numpy as np
@@ -37,9 +38,15 @@ class AmbientNoise:
 class DiffuseNoiseField:
     """Renders :class:`AmbientNoise` as pressure (Pa) at microphones for absolute sample ranges:
     time-keyed independent white noise per microphone, mixed per frequency to diffuse-field
-    coherence (:func:`~.rir.diffuse_mixing`) and shaped to the spectrum."""
+    coherence (:func:`~.rir.diffuse_mixing`) and shaped to the spectrum.
 
-    _PAD = 128  # samples of margin: the coherence-mixing filters are short (array aperture / c + sinc tails)
+    The field is computed in fixed frames aligned to absolute sample indices (overlap-save
+    with margins), so any block is identical however the timeline is cut. The mixing depends
+    only on inter-microphone distances, so a rigid array hears the same realisation at every
+    pose (the field is statistically isotropic and homogeneous)."""
+
+    FRAME = 8192
+    _PAD = 512  # margin for the (non-causal, decaying) coherence-mixing filters
 
     def __init__(self, ambient: AmbientNoise, fs: int, seed: int, c: float = 343.0) -> None:
         self.ambient, self.fs, self.c = ambient, int(fs), float(c)
@@ -48,30 +55,43 @@ class DiffuseNoiseField:
         self.h = h / np.sqrt(np.sum(h**2))
         self.p_rms = P_REF * 10 ** (ambient.level_db_spl / 20)
         self._noise: dict[int, TimeKeyedNoise] = {}
-        self._mix: tuple[int, np.ndarray, np.ndarray] | None = None
+        self._geometry: np.ndarray | None = None  # inter-mic distances the cached frames belong to
+        self._mix: np.ndarray | None = None
+        self._frames: OrderedDict[int, np.ndarray] = OrderedDict()
 
-    def render(self, mics: np.ndarray, n0: int, n: int) -> np.ndarray:
-        """Pressure (n_mics, n) Pa at microphones ``mics`` (n_mics, 3) world m, samples ``n0 ..``."""
-        mics = np.asarray(mics, float)
+    def _frame(self, k: int, mics: np.ndarray) -> np.ndarray:
+        fr = self._frames.get(k)
+        if fr is not None:
+            self._frames.move_to_end(k)
+            return fr
         n_mics = mics.shape[0]
         noise = self._noise.get(n_mics)
         if noise is None:
             noise = self._noise[n_mics] = TimeKeyedNoise(self.seed, stream=0xD1FF, channels=n_mics)
-        k = self.h.size - 1
-        pad = self._PAD
-        length = n + 2 * pad + k
-        w = noise.samples(n0 - pad - k, length)  # (M, length)
+        taps, pad, F = self.h.size - 1, self._PAD, self.FRAME
+        length = F + 2 * pad + taps
         n_fft = sfft.next_fast_len(length)
-        freqs = np.fft.rfftfreq(n_fft, 1.0 / self.fs)
+        if self._mix is None or self._mix.shape[0] != n_fft // 2 + 1:
+            freqs = np.fft.rfftfreq(n_fft, 1.0 / self.fs)
+            self._mix = diffuse_mixing(freqs, mics, self.c) * sfft.rfft(self.h, n_fft)[:, None, None]
+        w = noise.samples(k * F - pad - taps, length)
+        y = sfft.irfft(np.einsum("fij,jf->if", self._mix, sfft.rfft(w, n_fft, axis=1)), n_fft, axis=1)
+        fr = self.p_rms * y[:, pad + taps: pad + taps + F]
+        self._frames[k] = fr
+        if len(self._frames) > 32:
+            self._frames.popitem(last=False)
+        return fr
+
+    def render(self, mics: np.ndarray, n0: int, n: int) -> np.ndarray:
+        """Pressure (n_mics, n) Pa at microphones ``mics`` (n_mics, 3) world m, samples ``n0 ..``."""
+        mics = np.asarray(mics, float)
         d = np.linalg.norm(mics[:, None] - mics[None], axis=-1)
-        mix = None
-        if self._mix is not None:  # rigid array: same mixing at every pose (distances within 2 mm)
-            nf, dk, m = self._mix
-            if nf == n_fft and dk.shape == d.shape and np.allclose(dk, d, atol=2e-3):
-                mix = m
-        if mix is None:
-            mix = diffuse_mixing(freqs, mics, self.c) * sfft.rfft(self.h, n_fft)[:, None, None]
-            self._mix = (n_fft, d, mix)
-        spec = np.einsum("fij,jf->if", mix, sfft.rfft(w, n_fft, axis=1))
-        y = sfft.irfft(spec, n_fft, axis=1)
-        return self.p_rms * y[:, pad + k: pad + k + n]
+        if self._geometry is None or self._geometry.shape != d.shape or not np.allclose(self._geometry, d, atol=2e-3):
+            self._geometry, self._mix = d, None
+            self._frames.clear()
+        if n <= 0:
+            return np.zeros((mics.shape[0], 0))
+        F = self.FRAME
+        k0, k1 = n0 // F, (n0 + n - 1) // F
+        seg = np.concatenate([self._frame(k, mics) for k in range(k0, k1 + 1)], axis=1)
+        return seg[:, n0 - k0 * F: n0 - k0 * F + n]

@@ -107,10 +107,22 @@ def diffuse_mixing(freqs_hz: np.ndarray, mics: np.ndarray, c: float = 343.0) -> 
     square root varies smoothly with frequency, so the mixing filters are short (~ aperture / c).
     Depends only on inter-microphone distances: the same for every pose of a rigid array."""
     mics = np.asarray(mics, float)
+    freqs = np.asarray(freqs_hz, float)
     d = np.linalg.norm(mics[:, None, :] - mics[None, :, :], axis=-1)
-    gamma = np.sinc(2.0 * np.asarray(freqs_hz)[:, None, None] * d[None] / c)
+    for f_k, d_k, c_k, mix in _MIXING_CACHE:
+        if c_k == c and f_k.shape == freqs.shape and d_k.shape == d.shape and np.array_equal(f_k, freqs) \
+                and np.allclose(d_k, d, atol=2e-3):
+            return mix
+    gamma = np.sinc(2.0 * freqs[:, None, None] * d[None] / c)
     w, v = np.linalg.eigh(gamma)
-    return (v * np.sqrt(np.clip(w, 0.0, None))[:, None, :]) @ np.swapaxes(v, 1, 2)
+    mix = (v * np.sqrt(np.clip(w, 0.0, None))[:, None, :]) @ np.swapaxes(v, 1, 2)
+    _MIXING_CACHE.append((freqs, d, c, mix))
+    del _MIXING_CACHE[:-4]
+    return mix
+
+
+# (freqs, distances, c, mixing): the array geometry and block sizes rarely change.
+_MIXING_CACHE: list[tuple[np.ndarray, np.ndarray, float, np.ndarray]] = []
 
 
 class DiffuseTail:

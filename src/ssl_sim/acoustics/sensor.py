@@ -13,7 +13,7 @@ pressure signal by windowed-sinc interpolation (the real array is two 4-channel 
 from __future__ import annotations
 
 import warnings
-from dataclasses import dataclass
+from dataclasses import dataclass, replace
 
 import numpy as np
 
@@ -69,12 +69,19 @@ class Sensor:
     HALF_TAPS = 16
 
     def __init__(self, config: SensorConfig, n_channels: int, seed: int) -> None:
-        self.config = config
         chans = sorted(c for grp in config.device_channels for c in grp)
         if chans != list(range(n_channels)):
-            raise ValueError(
-                f"SensorConfig.device_channels: must partition channels 0..{n_channels - 1}, got {config.device_channels}"
-            )
+            uniform = len(set(config.device_offset_samples)) == 1 and len(set(config.clock_drift_ppm)) == 1
+            if not uniform:
+                raise ValueError(
+                    f"SensorConfig.device_channels: must partition channels 0..{n_channels - 1} when the devices' "
+                    f"timing differs, got {config.device_channels}"
+                )
+            # Other microphone counts (tests, other arrays): one device with the common timing.
+            config = replace(config, device_channels=(tuple(range(n_channels)),),
+                             device_offset_samples=config.device_offset_samples[:1],
+                             clock_drift_ppm=config.clock_drift_ppm[:1])
+        self.config = config
         self.n_channels = n_channels
         rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, 0x6A1E])
         self.gain_db = rng.normal(0.0, config.gain_mismatch_db, n_channels) if config.gain_mismatch_db > 0 else np.zeros(n_channels)

@@ -54,7 +54,7 @@ class AcousticConfig:
     ism_budget: float = 3e7
     late_reverb: bool = True
     rt60_s: float | None = None
-    max_rir_s: float = 1.5
+    max_rir_s: float = 4.0
     visibility_grid_m: float = 0.05
     position_quantum_m: float = 1e-4
     min_obstacle_extent_m: float = 0.05
