@@ -22,11 +22,12 @@ made robust for a mission with several victims:
   measures (range estimate <= ``bump_found_range_m`` or the level rise);
 * **turn** toward its azimuth and **drive** a step (shorter when the range
   estimate from the elevation says it is near), with odometry feedback;
-* **recover** from a bump (not at a victim) or a wheel stall: back off, then
-  sidestep (always to the same side, so repeated recoveries get around the
-  obstacle, until a sidestep is itself blocked); give up after
-  ``max_recoveries`` in a row;
-* **explore** a step forward after ``explore_after_silent`` silent listens.
+* **recover** from a bump (not at a victim) or a wheel stall: back off,
+  sidestep (always to the same side, wider on each consecutive recovery, so
+  repeated recoveries get around the obstacle; the other side once a sidestep
+  is itself blocked) and pass ahead; give up after ``max_recoveries`` in a row;
+* **explore** a step after ``explore_after_silent`` silent listens: ahead, or
+  away from the nearest found victim, whose calls mask fainter victims.
 
 Frames: detections are in the array frame, whose axes are the robot's
 (azimuth CCW from forward); poses and victim positions in the odometry frame
@@ -100,7 +101,8 @@ class RescueConfig:
     turn_first: bool = True                # turn to face the target (else translate holonomically)
     # recovery
     backoff_m: float = 0.15
-    sidestep_m: float = 0.30
+    sidestep_m: float = 0.30               # first sidestep; x2, x3 on the next consecutive recoveries
+    pass_m: float = 0.30                   # then ahead this far (past the obstacle's edge); 0 = no
     recover_speed: float = 0.15            # m/s
     max_recoveries: int = 6                # consecutive recoveries before giving up (stuck)
     stall_window_s: float = 0.6            # own stall check: progress over this window ...
@@ -179,11 +181,14 @@ class Candidate:
 
 @dataclass(frozen=True)
 class FoundVictim:
-    """A victim declared found: estimated ``position`` (x, y) in the odometry frame (m)."""
+    """A victim declared found: estimated ``position`` (x, y) in the odometry frame (m) and the
+    estimated ``height`` (m above the floor) of its sound, from the range and the elevation."""
 
     position: tuple[float, float]
     time: float
     criterion: str
+    height: float
+    voice: float = 0.0  # voice score of the last detection (0..1): a non-voice source may be "found" too
 
 
 class _Blocked(Exception):
@@ -421,7 +426,7 @@ class RescueBehaviour:
             dist = math.hypot(dx, dy)
             bearing = math.atan2(dy, dx) - yaw
             gate = max(math.radians(cfg.exclusion_deg), math.atan2(cfg.exclusion_radius_m, max(dist, 1e-6)))
-            expected_el = -math.atan2(cfg.array_height_m - cfg.source_height_m, dist)
+            expected_el = math.atan2(v.height - cfg.array_height_m, dist)
             if abs(wrap_angle(c.azimuth - bearing)) <= gate and \
                     abs(c.elevation - expected_el) <= math.radians(cfg.exclusion_elevation_deg):
                 return i
@@ -431,8 +436,12 @@ class RescueBehaviour:
         cfg = self.config
         r = range_m if range_m is not None else (t.range_m if t.range_m is not None else cfg.approach_stop_m)
         x, y, yaw = self.pose
-        pos = (float(x + r * math.cos(yaw + t.azimuth)), float(y + r * math.sin(yaw + t.azimuth)))
-        self.victims.append(FoundVictim(pos, self.clock.now(), criterion))
+        # Along the bearing measured in the odometry frame (the robot may have turned since the detection).
+        pos = (float(x + r * math.cos(t.world_bearing)), float(y + r * math.sin(t.world_bearing)))
+        # Where the sound is vertically (a victim may sit, or call from a hole): keeps the exclusion
+        # gate right when the mouth is not at the assumed source_height_m.
+        height = float(np.clip(cfg.array_height_m + r * math.tan(t.elevation), 0.0, 2.0))
+        self.victims.append(FoundVictim(pos, self.clock.now(), criterion, height, t.voice))
         self.state = RescueState.FOUND
         self._emit("victim_found", f"victim #{len(self.victims)} at ({pos[0]:.2f}, {pos[1]:.2f}) m: {criterion}",
                    {"position": pos, "criterion": criterion, **t.as_data()})
@@ -497,20 +506,25 @@ class RescueBehaviour:
             return
         self.state = RescueState.RECOVER
         side = "left" if self._side > 0 else "right"
-        self._emit("recover", f"{why}: back off {cfg.backoff_m:g} m, sidestep {side} {cfg.sidestep_m:g} m "
-                              f"(attempt {self._recoveries}/{cfg.max_recoveries})",
-                   {"bumper": status.bumper, "stalled": status.stalled, "side": side})
+        # Wider sidesteps on repeated bumps: the obstacle is wider than the last one.
+        sidestep = cfg.sidestep_m * min(self._recoveries, 3)
+        self._emit("recover", f"{why}: back off {cfg.backoff_m:g} m, sidestep {side} {sidestep:g} m, pass "
+                              f"{cfg.pass_m:g} m ahead (attempt {self._recoveries}/{cfg.max_recoveries})",
+                   {"bumper": status.bumper, "stalled": status.stalled, "side": side, "sidestep_m": sidestep})
         self._back_off(why)
         if self.done:
             return
         try:
-            self._translate(self._side * math.pi / 2, cfg.sidestep_m, cfg.recover_speed, arm_bumper_on_release=True)
+            self._translate(self._side * math.pi / 2, sidestep, cfg.recover_speed, arm_bumper_on_release=True)
+            if cfg.pass_m > 0:
+                # Move on past the obstacle's edge before turning back toward the target.
+                self._translate(0.0, cfg.pass_m, cfg.recover_speed)
         except _Blocked as b:
             if b.kind == "fault":
                 return
             # Keep sidestepping to the same side (around the obstacle) until that side is blocked too.
             self._side = -self._side
-            self._emit("recover", f"sidestep {side} blocked ({b.kind}); next time the other side")
+            self._emit("recover", f"sidestep/pass {side} blocked ({b.kind}); next time the other side")
 
     def _back_off(self, why: str) -> None:
         cfg = self.config
@@ -524,10 +538,18 @@ class RescueBehaviour:
     def _explore(self) -> None:
         cfg = self.config
         self.state = RescueState.EXPLORE
-        self._emit("explore", f"{cfg.explore_after_silent} silent listens: move {cfg.explore_step_m:g} m ahead "
-                              "to hear fainter sources", {"distance": cfg.explore_step_m})
+        heading, why = 0.0, "ahead"
+        x, y, yaw = self.pose
+        if self.victims:
+            # A found victim who keeps calling masks fainter ones (SRP-PHAT reports the dominant source):
+            # moving away from the nearest one raises the others relative to it.
+            v = min(self.victims, key=lambda v: math.hypot(v.position[0] - x, v.position[1] - y))
+            heading = float(wrap_angle(math.atan2(y - v.position[1], x - v.position[0]) - yaw))
+            why = f"away from found victim #{self.victims.index(v) + 1} (its calls mask fainter sources)"
+        self._emit("explore", f"{cfg.explore_after_silent} silent listens: move {cfg.explore_step_m:g} m {why} "
+                              "to hear fainter sources", {"distance": cfg.explore_step_m, "heading": heading})
         try:
-            self._translate(0.0, cfg.explore_step_m, cfg.drive_speed)
+            self._translate(heading, cfg.explore_step_m, cfg.drive_speed)
         except _Blocked as b:
             if b.kind != "fault":
                 self._recover(f"{'bumper pressed' if b.kind == 'bumper' else 'wheels stalled'} while exploring",
