@@ -87,6 +87,11 @@ def _r(x) -> float:
     return float(np.round(x, 3))
 
 
+def _rot2(yaw: float) -> np.ndarray:
+    c, s = np.cos(yaw), np.sin(yaw)
+    return np.array([[c, -s], [s, c]])
+
+
 def _uniform(rng: np.random.Generator, rng_range: Range) -> float:
     return float(rng.uniform(*rng_range))
 
@@ -98,9 +103,13 @@ class _Builder:
         self.boxes: list[Box] = []
 
     # -- placement helpers ---------------------------------------------------------------
-    def box(self, center, size, yaw, material, kind, climbable=False) -> Box:
-        b = Box(center=tuple(_r(c) for c in center), size=tuple(max(_r(s), 0.001) for s in size),
-                yaw=float(np.round(yaw, 4)), material=material, kind=kind, climbable=climbable)
+    def box(self, xy, bottom: float, size, yaw, material, kind, climbable=False) -> Box:
+        """Add a box of ``size`` standing on height ``bottom`` (m). Sizes are rounded to 1 mm and
+        centres to 0.1 mm, so the bottom stays exactly at ``bottom`` after rounding."""
+        size = tuple(max(_r(s), 0.001) for s in size)
+        center = (round(float(xy[0]), 4), round(float(xy[1]), 4), round(bottom + size[2] / 2, 4))
+        b = Box(center=center, size=size, yaw=float(np.round(yaw, 4)), material=material, kind=kind,
+                climbable=climbable)
         self.boxes.append(b)
         return b
 
@@ -111,12 +120,23 @@ class _Builder:
     def footprint_radius(self, size) -> float:
         return float(np.hypot(size[0], size[1]) / 2)
 
-    def overlaps(self, center_xy, radius, kinds=None) -> bool:
-        """Whether a disc overlaps any box footprint (conservative: box bounding circles)."""
+    def overlaps(self, xy, size, yaw: float, clearance: float = 0.0, kinds=None) -> bool:
+        """Whether the footprint rectangle (``size`` x, y at ``xy``, turned by ``yaw``) grown by
+        ``clearance`` overlaps the footprint of any box of the given kinds (separating axes)."""
+        ha = np.asarray(size[:2], float) / 2 + clearance
+        ra = _rot2(yaw)
         for b in self.boxes:
             if kinds is not None and b.kind not in kinds:
                 continue
-            if np.hypot(*(np.asarray(center_xy) - b.center[:2])) < radius + self.footprint_radius(b.size):
+            hb = np.asarray(b.size[:2]) / 2
+            rb = _rot2(b.yaw)
+            t = np.asarray(b.center[:2]) - np.asarray(xy, float)
+            separated = False
+            for axis in (*ra.T, *rb.T):
+                if abs(t @ axis) > np.abs(ra.T @ axis) @ ha + np.abs(rb.T @ axis) @ hb:
+                    separated = True
+                    break
+            if not separated:
                 return True
         return False
 
@@ -127,28 +147,37 @@ class _Builder:
         return area / (self.L[0] * self.L[1])
 
     # -- scene elements --------------------------------------------------------------------
-    def pillars(self) -> None:
+    def _place(self, size, yaw: float, clearance: float, margin: float) -> np.ndarray | None:
+        """A random free spot (no overlap with anything placed so far) for a footprint, or None."""
+        for _ in range(60):
+            xy = self.xy_inside(self.footprint_radius(size), margin=margin)
+            if not self.overlaps(xy, size, yaw, clearance):
+                return xy
+        return None
+
+    def pillars(self) -> bool:
         for _ in range(self.cfg.n_pillars):
             s = _uniform(self.rng, (0.25, 0.4))
-            for _ in range(50):
-                xy = self.xy_inside(s, margin=0.6)
-                if not self.overlaps(xy, s + 0.5):
-                    self.box((*xy, self.L[2] / 2), (s, s, self.L[2]), 0.0, "unpainted_concrete", "pillar")
-                    break
+            xy = self._place((s, s), 0.0, clearance=0.5, margin=0.5)
+            if xy is None:
+                return False
+            self.box(xy, 0.0, (s, s, self.L[2]), 0.0, "unpainted_concrete", "pillar")
+        return True
 
-    def walls(self) -> None:
+    def walls(self) -> bool:
+        """Broken interior walls: roughly axis-aligned, partial height."""
         for _ in range(self.cfg.n_walls):
             length = _uniform(self.rng, self.cfg.wall_length)
             height = _uniform(self.rng, self.cfg.wall_height)
             thick = _uniform(self.rng, (0.1, 0.2))
-            yaw = self.rng.choice([0.0, np.pi / 2]) + self.rng.normal(0, 0.08)
-            for _ in range(50):
-                xy = self.xy_inside(length / 2, margin=0.5)
-                if not self.overlaps(xy, length / 2 + 0.3):
-                    self.box((*xy, height / 2), (length, thick, height), yaw, "brickwork", "wall")
-                    break
+            yaw = float(self.rng.choice([0.0, np.pi / 2]) + self.rng.normal(0, 0.08))
+            xy = self._place((length, thick), yaw, clearance=0.45, margin=0.35)
+            if xy is None:
+                return False
+            self.box(xy, 0.0, (length, thick, height), yaw, "brickwork", "wall")
+        return True
 
-    def voids(self) -> None:
+    def voids(self) -> bool:
         """A slab bridging two blocks: free space under it (height ``h``) where a victim can lie."""
         for _ in range(self.cfg.n_voids):
             span = _uniform(self.rng, (0.9, 1.3))
@@ -156,18 +185,15 @@ class _Builder:
             h = _uniform(self.rng, (0.3, 0.45))
             t = _uniform(self.rng, (0.08, 0.14))
             yaw = float(self.rng.uniform(-np.pi, np.pi))
-            for _ in range(50):
-                xy = self.xy_inside(np.hypot(span, depth) / 2, margin=0.4)
-                if self.overlaps(xy, np.hypot(span, depth) / 2 + 0.2):
-                    continue
-                c, s = np.cos(yaw), np.sin(yaw)
-                ex = np.array([c, s])
-                leg = 0.2
-                for side in (-1, 1):
-                    p = xy + side * ex * (span / 2 - leg / 2)
-                    self.box((*p, h / 2), (leg, depth, h), yaw, "rough_concrete", "block")
-                self.box((*xy, h + t / 2), (span, depth, t), yaw, "rough_concrete", "slab")
-                break
+            xy = self._place((span, depth), yaw, clearance=0.4, margin=0.3)
+            if xy is None:
+                return False
+            ex = _rot2(yaw)[:, 0]
+            leg = 0.2
+            for side in (-1, 1):
+                self.box(xy + side * ex * (span / 2 - leg / 2), 0.0, (leg, depth, h), yaw, "rough_concrete", "block")
+            self.box(xy, _r(h), (span, depth, t), yaw, "rough_concrete", "slab")
+        return True
 
     def slabs_and_blocks(self) -> None:
         cfg, rng = self.cfg, self.rng
@@ -190,12 +216,12 @@ class _Builder:
                     local = rng.uniform([-hx, -hy], [hx, hy])
                     xy = np.asarray(sup.center[:2]) + sup.rotation[:2, :2] @ local
                     top = sup.center[2] + sup.size[2] / 2
-                    self.box((*xy, top + size[2] / 2), size, yaw, material, kind)
+                    self.box(xy, top, size, yaw, material, kind)
                     continue
             xy = self.xy_inside(self.footprint_radius(size))
-            if self.overlaps(xy, self.footprint_radius(size) + 0.05, kinds=("pillar", "wall")):
+            if self.overlaps(xy, size, yaw, 0.05, kinds=("pillar", "wall")):
                 continue
-            self.box((*xy, size[2] / 2), size, yaw, material, kind)
+            self.box(xy, 0.0, size, yaw, material, kind)
 
     def debris(self) -> None:
         cfg, rng = self.cfg, self.rng
@@ -205,15 +231,16 @@ class _Builder:
             size = [_uniform(rng, cfg.debris_size[0]), _uniform(rng, cfg.debris_size[1]),
                     _uniform(rng, cfg.debris_height)]
             xy = self.xy_inside(self.footprint_radius(size))
+            yaw = float(rng.uniform(-np.pi, np.pi))
             # Small debris lies on the floor, not inside or under big debris.
-            if self.overlaps(xy, self.footprint_radius(size) + 0.02,
-                             kinds=("pillar", "wall", "slab", "block")):
+            if self.overlaps(xy, size, yaw, 0.02, kinds=("pillar", "wall", "slab", "block")):
                 continue
             material = str(rng.choice(["rough_concrete", "brickwork", "wood_16mm"]))
-            self.box((*xy, size[2] / 2), size, float(rng.uniform(-np.pi, np.pi)), material, "debris", climbable=True)
+            self.box(xy, 0.0, size, yaw, material, "debris", climbable=True)
 
     # -- victims -------------------------------------------------------------------------------
     def victim(self, world_boxes: list[Box]) -> VictimSite | None:
+        """A victim on, beside or under rubble (mode drawn from ``victim_modes``); None if the draw failed."""
         rng, cfg = self.rng, self.cfg
         mode = str(rng.choice(list(cfg.victim_modes)))
         big = [b for b in world_boxes if b.kind in ("slab", "block") and not b.climbable]
@@ -236,8 +263,11 @@ class _Builder:
                 local = rng.uniform(-0.3, 0.3, 2) * (np.asarray(b.size[:2]) / 2)
                 xy = np.asarray(b.center[:2]) + b.rotation[:2, :2] @ local
                 z = b.center[2] + b.size[2] / 2 + 0.12
+                if any(o.contains([xy[0], xy[1], o.center[2]]) and o.center[2] - o.size[2] / 2 > z - 0.15
+                       for o in world_boxes if not o.climbable):
+                    return None  # something lies on top of this block: not in the open
                 return VictimSite((_r(xy[0]), _r(xy[1]), _r(z)), buried=0.0)
-        # beside: on the floor next to a piece of rubble (or anywhere if there is none)
+        # beside: on the floor next to a piece of rubble (or anywhere if there is none), not under any
         if big:
             b = big[int(rng.integers(len(big)))]
             ang = rng.uniform(-np.pi, np.pi)
@@ -245,8 +275,10 @@ class _Builder:
             xy = np.asarray(b.center[:2]) + d * np.array([np.cos(ang), np.sin(ang)])
         else:
             xy = self.xy_inside(0.3)
-        return VictimSite((_r(xy[0]), _r(xy[1]), _r(rng.uniform(0.12, 0.25))),
-                          buried=float(np.round(rng.uniform(0.0, 0.2), 2)))
+        z = rng.uniform(0.12, 0.25)
+        if any(o.contains([xy[0], xy[1], o.center[2]]) for o in world_boxes if not o.climbable):
+            return None
+        return VictimSite((_r(xy[0]), _r(xy[1]), _r(z)), buried=float(np.round(rng.uniform(0.0, 0.2), 2)))
 
 
 def blocking_obstacles(world: World) -> list[Box]:
@@ -312,15 +344,16 @@ def generate_world(cfg: RubbleConfig = RubbleConfig(), seed: int = 0, name: str 
     room = Room(size=cfg.room_size)
     for _ in range(cfg.max_attempts):
         b = _Builder(cfg, rng)
-        b.pillars()
-        b.walls()
-        b.voids()
+        if not (b.pillars() and b.walls() and b.voids()):
+            continue
         b.slabs_and_blocks()
         b.debris()
         victims = []
         for _ in range(cfg.n_victims):
             for _ in range(20):
                 v = b.victim(b.boxes)
+                if v is None:
+                    continue
                 p = np.asarray(v.position)
                 world_try = World(room=room, obstacles=tuple(b.boxes))
                 apart = all(np.linalg.norm(p[:2] - np.asarray(u.position[:2])) > 0.5 for u in victims)
