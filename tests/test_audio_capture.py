@@ -1,6 +1,7 @@
 """Merging two 4-channel USB devices into the 8-channel array stream (no devices needed)."""
 import sys
 import threading
+import time
 import types
 
 import numpy as np
@@ -178,8 +179,9 @@ class _FakeSD(types.SimpleNamespace):
     class PortAudioError(Exception):
         pass
 
-    def __init__(self, streams, names=("USB Camera-B4.09.24.1", "USB Camera-B4.09.24.1")):
+    def __init__(self, streams, names=("USB Camera-B4.09.24.1", "USB Camera-B4.09.24.1"), pace=0.0):
         super().__init__()
+        self.pace = pace  # wall seconds per second of audio delivered (0: all at once)
         self._data = streams
         self._names = names
         self.opened = []
@@ -205,14 +207,21 @@ class _FakeSD(types.SimpleNamespace):
             def start(self_):
                 data = (np.asarray(sd._data[device - 1]).T * 32767).astype(np.int16)  # (frames, channels)
 
+                self_.stopped = False
+
                 def run():
                     for i in range(0, len(data), blocksize):
+                        if self_.stopped:
+                            break
                         chunk = data[i:i + blocksize]
                         callback(chunk, len(chunk), None, None)
+                        if sd.pace:
+                            time.sleep(sd.pace * len(chunk) / samplerate)
                 self_.thread = threading.Thread(target=run, daemon=True)
                 self_.thread.start()
 
             def stop(self_):
+                self_.stopped = True
                 self_.thread.join()
 
             def close(self_):

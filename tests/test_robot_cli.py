@@ -92,3 +92,21 @@ def test_bad_arguments_are_named(recording, tmp_path, capsys):
     assert "has 4 channel(s), expected 8" in capsys.readouterr().err
     assert run(["--dry-run", "--replay", str(tmp_path / "none.wav")])[0] == 2
     assert "not found" in capsys.readouterr().err
+
+
+def test_live_audio_path_with_a_fake_sounddevice(monkeypatch):
+    """--audio end to end: two fake 4-channel devices with a 523-sample offset, calibrated at start."""
+    import robot.hardware.audio as hw
+    from test_audio_capture import _devices, _FakeSD, _plane_wave, _unit
+
+    truth = 0.05 * _plane_wave(_unit(-150, 10), 12 * FS, seed=2)
+    sd = _FakeSD(_devices(truth, 523), pace=0.25)  # audio arrives 4x faster than real time
+    monkeypatch.setattr(hw, "import_sounddevice", lambda: sd)
+    code, text = run(["--dry-run", "--audio", "1,2", "--calibrate", "1.0", "--max-time", "1.5",
+                      "--set", "listen_s=0.5", "--set", "settle_s=0", "--set", "step_m=0.05", "--set", "min_step_m=0.05",
+                      "--set", "turn_first=false"])
+    assert code == 0, text
+    assert "device offset: offset 523 samples" in text and "- applied" in text
+    target = next(line for line in text.splitlines() if " target " in line)
+    assert float(target.split("az ")[1].split(" deg")[0]) == pytest.approx(-150, abs=5)
+    assert sd.opened == []  # streams closed at exit

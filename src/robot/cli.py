@@ -41,6 +41,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--fs", type=int, default=16000, help="sample rate of live capture (Hz) (default: %(default)s)")
     p.add_argument("--array", default="cube8", help="array preset or .toml/.json geometry (default: %(default)s)")
     p.add_argument("--sources", type=int, default=3, help="sources localized per listen (default: %(default)s)")
+    p.add_argument("--rel-threshold", type=float, default=0.15,
+                   help="report sources down to this fraction of the strongest's SRP power, so that a weaker "
+                        "voice can be preferred over a louder noise (default: %(default)s)")
     p.add_argument("--max-time", type=float, default=600.0, help="mission time limit (s) (default: %(default)s)")
     p.add_argument("--max-victims", type=int, default=None, help="stop after this many victims")
     p.add_argument("--realtime", action="store_true", help="with --replay: pace the replay in real time")
@@ -103,7 +106,7 @@ def _open_audio(args, clock: Clock, geometry, out):
     cmap = parse_channel_map(args.channel_map)
     if len(cmap) != geometry.n_mics:
         raise ValueError(f"--channel-map: {len(cmap)} entries, array '{geometry.name}' has {geometry.n_mics} mics")
-    cap = ArrayCapture(devices, args.fs, MergeConfig(channel_map=cmap), positions=geometry.positions)
+    cap = ArrayCapture(devices, args.fs, MergeConfig(channel_map=cmap), positions=geometry.positions, clock=clock)
     if args.calibrate > 0:
         print(f"{PROG}: measuring the offset between the two audio devices for {args.calibrate:g} s: "
               "clap or talk near the robot", file=out, flush=True)
@@ -115,8 +118,18 @@ def _open_audio(args, clock: Clock, geometry, out):
                   "tracking will correct it", file=out)
         if est is not None:
             state = "applied" if est.confident else "NOT applied (not confident: make a louder sound)"
-            print(f"{PROG}: device offset {est} - {state}", file=out, flush=True)
+            print(f"{PROG}: device offset: {est} - {state}", file=out, flush=True)
     return cap
+
+
+class _MissionClock(WallClock):
+    """Wall time from the start of the program (s), so printed event times read as mission time."""
+
+    def __init__(self) -> None:
+        self._t0 = super().now()
+
+    def now(self) -> float:
+        return super().now() - self._t0
 
 
 def _print_event(e: RescueEvent, as_json: bool, out) -> None:
@@ -169,10 +182,11 @@ def main(argv: list[str] | None = None, out=None) -> int:
     try:
         config = _rescue_config(args)
         geometry = get_array(args.array)
-        clock: Clock = ManualClock() if args.replay and not args.realtime else WallClock()
+        clock: Clock = ManualClock() if args.replay and not args.realtime else _MissionClock()
         drive = _open_drive(args, clock)
         audio = _open_audio(args, clock, geometry, out)
-        localizer = Localizer(geometry, LocalizerConfig(fs=audio.sample_rate, n_sources=max(1, args.sources)))
+        localizer = Localizer(geometry, LocalizerConfig(fs=audio.sample_rate, n_sources=max(1, args.sources),
+                                                        rel_threshold=args.rel_threshold))
     except (ValueError, FileNotFoundError, ImportError, OSError, RuntimeError) as exc:
         for dev in (drive, audio):
             if dev is not None:
