@@ -316,7 +316,9 @@ def test_keepalive_resends_motion_until_stop(fake):
     cfg = SerialDriveConfig(reply_timeout=0.05, keepalive=0.05, connect_timeout=1.0)
     with SerialDrive(fake.path, cfg) as drive:
         drive.set_twist(0.1, 0.0, 0.0)
-        time.sleep(0.35)
+        for _ in range(14):                                   # telemetry polls do not replace keepalives
+            drive.telemetry()
+            time.sleep(0.025)
         n_twists = sum(isinstance(m, P.SetTwist) for _, m in fake.received)
         assert n_twists >= 4                                  # refreshed well inside the 300 ms watchdog
         drive.stop()

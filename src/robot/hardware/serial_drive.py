@@ -104,7 +104,7 @@ class SerialDrive(DriveBase):
         self._seq = 0
         self._lock = threading.RLock()
         self._active: P.Message | None = None   # non-zero motion command kept alive
-        self._last_sent = 0.0
+        self._last_motion = 0.0                 # when the kept-alive command was last sent (monotonic s)
         self._bg_error: DriveLinkError | None = None
         self._closed = threading.Event()
         try:
@@ -207,6 +207,7 @@ class SerialDrive(DriveBase):
     def _motion(self, msg: P.Message, moving: bool) -> None:
         with self._lock:
             self._transact(msg, P.MsgType.ACK)
+            self._last_motion = time.monotonic()
             self._active = msg if moving else None
 
     def _keepalive_loop(self) -> None:
@@ -215,10 +216,12 @@ class SerialDrive(DriveBase):
             with self._lock:
                 if self._active is None or self._closed.is_set():
                     continue
-                if time.monotonic() - self._last_sent < period:
+                # only motion commands feed the MCU's command watchdog (telemetry polls do not)
+                if time.monotonic() - self._last_motion < period:
                     continue
                 try:
                     self._transact(self._active, P.MsgType.ACK)
+                    self._last_motion = time.monotonic()
                     self.stats.keepalives += 1
                 except DriveLinkError as e:
                     self._bg_error = e
@@ -265,7 +268,6 @@ class SerialDrive(DriveBase):
             self._ser.reset_input_buffer()   # replies to abandoned attempts are useless now
             self._ser.write(data)
             self._ser.flush()
-            self._last_sent = time.monotonic()
         except _LINK_ERRORS as e:
             raise DriveLinkError(f"drive serial port {self.port!r} failed on write: {e}") from e
 

@@ -1,0 +1,331 @@
+/* simdrive: runs the drive firmware (build/drive.elf) in simavr as a simulated Arduino Mega.
+ *
+ *  - UART0 is bridged to a pseudo-terminal; its slave path is printed first as "PTY <path>".
+ *    Bytes from the pty are fed into the simulated UART (which paces them at the
+ *    configured baud rate), bytes the firmware sends are written back.
+ *  - The motor outputs are watched after every instruction. When OCR4A/B/C (PWM duty) or
+ *    the direction pins PA0..2 change and then stay unchanged for 200 cycles, a line
+ *        PWM <cycle> <duty0> <duty1> <duty2> <dir bits> <rx cycle>
+ *    is printed: <cycle> is when the last of the changes happened, <rx cycle> when the
+ *    last UART byte before it was completely received (RXC raised): the difference is the
+ *    command-to-PWM latency. All times are simulated CPU cycles at 16 MHz.
+ *  - An ideal motor model turns each wheel at duty/PWM_TOP * max speed (sign from the
+ *    direction pin) and produces x4 quadrature edges on PB0..PB5 at <cpr> counts/rev;
+ *    "ENC <cycle> <c0> <c1> <c2>" reports the model's counts every 50 ms.
+ *  - --profile ADDR (a function's byte address, as avr-nm prints it):
+ *    every call of that function prints "PROF <entry cycle> <cycles to its return>",
+ *    interrupts taken meanwhile included.
+ *  - "WDT <cycle> <WDTCSR>" whenever the watchdog control register changes.
+ *  - Simulated time is throttled to never run ahead of wall-clock time (x --speed), so
+ *    the firmware's 300 ms watchdog means 300 ms to the host; simavr otherwise runs the
+ *    core as fast as it can (sleep periods advance in 16-cycle steps).
+ *
+ * usage: simdrive [--stall WHEEL] [--speed X] [--duration S] [--cpr N] [--max-speed RADS]
+ *                 [--pwm-top N] [--profile ADDR] firmware.elf
+ */
+#define _GNU_SOURCE
+#include <errno.h>
+#include <fcntl.h>
+#include <math.h>
+#include <pty.h>
+#include <signal.h>
+#include <stdio.h>
+#include <stdlib.h>
+#include <string.h>
+#include <sys/prctl.h>
+#include <termios.h>
+#include <time.h>
+#include <unistd.h>
+
+#include "avr_ioport.h"
+#include "avr_uart.h"
+#include "sim_avr.h"
+#include "sim_elf.h"
+#include "sim_irq.h"
+
+DEFINE_FIFO(uint16_t, uart_fifo);                /* the header only declares the UART FIFO accessors */
+
+#define F_SIM 16000000UL
+/* ATmega2560 data-space addresses (avr/iom2560.h) */
+#define A_PORTA 0x22
+#define A_OCR4AL 0xA8
+#define A_WDTCSR 0x60            /* OCR4A L/H, OCR4B L/H, OCR4C L/H: 0xA8..0xAD */
+#define SETTLE_CYCLES 200
+#define SYNC_CYCLES 800          /* 50 us: pty pumping, throttling, motor model step */
+#define ENC_REPORT_CYCLES (F_SIM / 20)
+
+static avr_t *avr;
+static avr_uart_t *uart0;
+static int pty_master = -1;
+static volatile sig_atomic_t stop_flag;
+
+static uint8_t out_buf[4096];
+static size_t out_len;
+static uint8_t in_buf[4096];
+static size_t in_len, in_pos;
+
+static avr_cycle_count_t last_rx_cycle;
+
+static int stall_wheel = -1;
+static double speed_factor = 1.0;
+static double max_seconds = 600.0;
+static int cpr = 1200;
+static double max_speed = 20.0;
+static int pwm_top = 400;
+static long profile_addr = -1;
+
+static avr_irq_t *enc_irq[6];
+static double wheel_angle[3];
+static long enc_count[3];
+
+static void on_signal(int sig) { (void)sig; stop_flag = 1; }
+
+static void logger(avr_t *a, const int level, const char *fmt, va_list ap)
+{
+    (void)a;
+    /* simavr 1.6 does not model Timer4's phase-correct PWM mode 10 and warns on every OCR
+     * write; the harness reads the OCR registers directly, so that warning is noise */
+    if (level <= LOG_WARNING && !strstr(fmt, "UNSUPPORTED"))
+        vfprintf(stderr, fmt, ap);
+}
+
+static void uart_out_hook(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+    (void)irq; (void)param;
+    if (out_len < sizeof out_buf)
+        out_buf[out_len++] = (uint8_t)value;
+}
+
+static void rxc_pending_hook(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+    (void)irq; (void)param;
+    if (value)
+        last_rx_cycle = avr->cycle;
+}
+
+static void pump_pty(void)
+{
+    if (out_len) {
+        ssize_t n = write(pty_master, out_buf, out_len);
+        if (n > 0) {
+            memmove(out_buf, out_buf + n, out_len - (size_t)n);
+            out_len -= (size_t)n;
+        }
+    }
+    if (in_pos == in_len) {
+        in_pos = in_len = 0;
+        ssize_t n = read(pty_master, in_buf, sizeof in_buf);
+        if (n > 0)
+            in_len = (size_t)n;
+    }
+    /* feed the simulated UART while receive is enabled and its line FIFO has room;
+     * avr_uart delivers the FIFO bytes one per character time */
+    while (in_pos < in_len && avr_regbit_get(avr, uart0->rxen) && !uart_fifo_isfull(&uart0->input))
+        avr_raise_irq(uart0->io.irq + UART_IRQ_INPUT, in_buf[in_pos++]);
+}
+
+static void set_encoder_pins(int i)
+{
+    /* position in the cycle 00 -> 10 -> 11 -> 01 as (A, B) */
+    static const uint8_t A[4] = {0, 1, 1, 0}, B[4] = {0, 0, 1, 1};
+    int pos = (int)(enc_count[i] & 3);
+    avr_raise_irq(enc_irq[2 * i], A[pos]);
+    avr_raise_irq(enc_irq[2 * i + 1], B[pos]);
+}
+
+static void motor_step(double dt)
+{
+    uint8_t dir = avr->data[A_PORTA];
+    for (int i = 0; i < 3; i++) {
+        uint16_t ocr = (uint16_t)(avr->data[A_OCR4AL + 2 * i] | (avr->data[A_OCR4AL + 2 * i + 1] << 8));
+        if (ocr > pwm_top)
+            ocr = (uint16_t)pwm_top;
+        double w = (double)ocr / pwm_top * max_speed * ((dir >> i) & 1 ? 1.0 : -1.0);
+        if (i == stall_wheel)
+            w = 0.0;
+        wheel_angle[i] += w * dt;
+        long target = (long)floor(wheel_angle[i] / (2.0 * M_PI) * cpr);
+        /* at most one quadrature step per wheel per step, as a real encoder would */
+        if (target > enc_count[i]) {
+            enc_count[i]++;
+            set_encoder_pins(i);
+        } else if (target < enc_count[i]) {
+            enc_count[i]--;
+            set_encoder_pins(i);
+        }
+    }
+}
+
+static double wall_seconds(const struct timespec *t0)
+{
+    struct timespec t;
+    clock_gettime(CLOCK_MONOTONIC, &t);
+    return (double)(t.tv_sec - t0->tv_sec) + 1e-9 * (double)(t.tv_nsec - t0->tv_nsec);
+}
+
+static void no_sleep(avr_t *a, avr_cycle_count_t how_long) { (void)a; (void)how_long; }
+
+#define WAKE_CYCLES 16
+static avr_cycle_count_t wake_tick(avr_t *a, avr_cycle_count_t when, void *param)
+{
+    (void)a; (void)param;
+    return when + WAKE_CYCLES;
+}
+
+static void usage(void)
+{
+    fprintf(stderr, "usage: simdrive [--stall WHEEL] [--speed X] [--duration S] [--cpr N] "
+                    "[--max-speed RADS] [--pwm-top N] [--profile ADDR] firmware.elf\n");
+    exit(2);
+}
+
+int main(int argc, char **argv)
+{
+    const char *elf = NULL;
+    for (int i = 1; i < argc; i++) {
+        if (!strcmp(argv[i], "--stall") && i + 1 < argc) stall_wheel = atoi(argv[++i]);
+        else if (!strcmp(argv[i], "--speed") && i + 1 < argc) speed_factor = atof(argv[++i]);
+        else if (!strcmp(argv[i], "--duration") && i + 1 < argc) max_seconds = atof(argv[++i]);
+        else if (!strcmp(argv[i], "--cpr") && i + 1 < argc) cpr = atoi(argv[++i]);
+        else if (!strcmp(argv[i], "--max-speed") && i + 1 < argc) max_speed = atof(argv[++i]);
+        else if (!strcmp(argv[i], "--pwm-top") && i + 1 < argc) pwm_top = atoi(argv[++i]);
+        else if (!strcmp(argv[i], "--profile") && i + 1 < argc) profile_addr = strtol(argv[++i], NULL, 0);
+        else if (argv[i][0] == '-') usage();
+        else elf = argv[i];
+    }
+    if (!elf || speed_factor <= 0 || cpr <= 0 || pwm_top <= 0)
+        usage();
+    setvbuf(stdout, NULL, _IOLBF, 0);
+    prctl(PR_SET_PDEATHSIG, SIGTERM);            /* never outlive the test that started us */
+    signal(SIGTERM, on_signal);
+    signal(SIGINT, on_signal);
+    avr_global_logger_set(logger);
+
+    elf_firmware_t fw;
+    memset(&fw, 0, sizeof fw);
+    if (elf_read_firmware(elf, &fw) != 0) {
+        fprintf(stderr, "simdrive: cannot read firmware %s\n", elf);
+        return 1;
+    }
+    strcpy(fw.mmcu, "atmega2560");
+    fw.frequency = F_SIM;
+    avr = avr_make_mcu_by_name(fw.mmcu);
+    if (!avr) {
+        fprintf(stderr, "simdrive: simavr has no atmega2560 core\n");
+        return 1;
+    }
+    avr_init(avr);
+    avr_load_firmware(avr, &fw);
+    avr->sleep = no_sleep;                       /* we throttle against the wall clock ourselves */
+    /* simavr advances a sleeping core to its next cycle timer *before* servicing the interrupt
+     * that should wake it, which would delay wake-ups by up to a tick period (1 ms here) and
+     * let two encoder edges pass before the ISR reads the pins. A 16-cycle periodic timer
+     * keeps the simulated wake-up latency <= 1 us (costs ~1 M cheap callbacks per sim second). */
+    avr_cycle_timer_register(avr, WAKE_CYCLES, wake_tick, NULL);
+
+    for (avr_io_t *io = avr->io_port; io; io = io->next)
+        if (!strcmp(io->kind, "uart") && ((avr_uart_t *)io)->name == '0')
+            uart0 = (avr_uart_t *)io;
+    if (!uart0) {
+        fprintf(stderr, "simdrive: no UART0 in the simulated core\n");
+        return 1;
+    }
+    uint32_t flags = 0;                          /* no stdout echo, no poll sleeping */
+    avr_ioctl(avr, AVR_IOCTL_UART_SET_FLAGS('0'), &flags);
+    avr_irq_register_notify(avr_io_getirq(avr, AVR_IOCTL_UART_GETIRQ('0'), UART_IRQ_OUTPUT),
+                            uart_out_hook, NULL);
+    avr_irq_register_notify(&uart0->rxc.irq[AVR_INT_IRQ_PENDING], rxc_pending_hook, NULL);
+    for (int p = 0; p < 6; p++)
+        enc_irq[p] = avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('B'), p);
+    /* the encoders drive their lines: without this, the firmware enabling its pull-ups
+     * would make simavr read the (still low) encoder lines as high */
+    avr_ioport_external_t ext = {.name = 'B', .mask = 0x3F, .value = 0x00};
+    avr_ioctl(avr, AVR_IOCTL_IOPORT_SET_EXTERNAL('B'), &ext);
+    for (int i = 0; i < 3; i++)
+        set_encoder_pins(i);
+
+    int slave;
+    char name[256];
+    if (openpty(&pty_master, &slave, name, NULL, NULL) != 0) {
+        perror("simdrive: openpty");
+        return 1;
+    }
+    struct termios tio;
+    tcgetattr(slave, &tio);
+    cfmakeraw(&tio);
+    tcsetattr(slave, TCSANOW, &tio);
+    fcntl(pty_master, F_SETFL, fcntl(pty_master, F_GETFL) | O_NONBLOCK);
+    printf("PTY %s\n", name);                    /* slave stays open: the master never sees a hang-up */
+
+    struct timespec t0;
+    clock_gettime(CLOCK_MONOTONIC, &t0);
+    uint8_t snap[7], cur[7];
+    memset(snap, 0, sizeof snap);
+    avr_cycle_count_t changed_at = 0, next_sync = SYNC_CYCLES, next_enc = ENC_REPORT_CYCLES;
+    int settling = 0;
+    int in_profiled = 0;
+    unsigned prof_sp = 0;
+    avr_cycle_count_t prof_start = 0;
+    int state = cpu_Running;
+
+    while (!stop_flag) {
+        state = avr_run(avr);
+        if (state == cpu_Done || state == cpu_Crashed)
+            break;
+
+        if (profile_addr >= 0) {
+            /* 3-byte return address on the 2560: the function has returned when SP is 3 above
+             * its value at entry */
+            unsigned sp = avr->data[0x5D] | (avr->data[0x5E] << 8);
+            if (!in_profiled && avr->pc == (avr_flashaddr_t)profile_addr) {
+                in_profiled = 1;
+                prof_sp = sp;
+                prof_start = avr->cycle;
+            } else if (in_profiled && sp == prof_sp + 3) {
+                in_profiled = 0;
+                printf("PROF %llu %llu\n", (unsigned long long)prof_start,
+                       (unsigned long long)(avr->cycle - prof_start));
+            }
+        }
+
+        memcpy(cur, &avr->data[A_OCR4AL], 6);
+        cur[6] = avr->data[A_PORTA] & 0x07;
+        if (memcmp(cur, snap, sizeof cur)) {
+            memcpy(snap, cur, sizeof snap);
+            changed_at = avr->cycle;
+            settling = 1;
+        } else if (settling && avr->cycle - changed_at >= SETTLE_CYCLES) {
+            settling = 0;
+            printf("PWM %llu %u %u %u %u %llu\n", (unsigned long long)changed_at,
+                   snap[0] | (snap[1] << 8), snap[2] | (snap[3] << 8), snap[4] | (snap[5] << 8),
+                   snap[6], (unsigned long long)last_rx_cycle);
+        }
+
+        if (avr->cycle >= next_sync) {
+            avr_cycle_count_t steps = (avr->cycle - next_sync) / SYNC_CYCLES + 1;
+            next_sync += steps * SYNC_CYCLES;
+            motor_step((double)(steps * SYNC_CYCLES) / F_SIM);
+            pump_pty();
+            double sim_s = (double)avr->cycle / F_SIM;
+            double ahead = sim_s / speed_factor - wall_seconds(&t0);
+            if (ahead > 0.0005) {
+                struct timespec d = {0, (long)(ahead * 1e9)};
+                nanosleep(&d, NULL);
+            }
+            if (sim_s > max_seconds)
+                break;
+            static int wdtcsr = -1;
+            if (avr->data[A_WDTCSR] != wdtcsr) {
+                wdtcsr = avr->data[A_WDTCSR];
+                printf("WDT %llu %d\n", (unsigned long long)avr->cycle, wdtcsr);
+            }
+        }
+        if (avr->cycle >= next_enc) {
+            next_enc += ENC_REPORT_CYCLES;
+            printf("ENC %llu %ld %ld %ld\n", (unsigned long long)avr->cycle,
+                   enc_count[0], enc_count[1], enc_count[2]);
+        }
+    }
+    printf("END %llu %d\n", (unsigned long long)avr->cycle, state);
+    return state == cpu_Crashed ? 1 : 0;
+}

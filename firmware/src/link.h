@@ -1,0 +1,26 @@
+/* Serial link: interrupt-driven UART0 receive ring, resynchronising frame parser, framed replies. */
+#ifndef LINK_H
+#define LINK_H
+
+#include <stdint.h>
+#include "protocol.h"
+
+typedef struct {
+    uint16_t rx_frames, crc_errors, length_errors, timeouts, dropped_bytes, naks, rx_overflows;
+} link_stats_t;
+
+extern link_stats_t link_stats;
+
+void link_init(void);
+/* Extract the next CRC-valid frame from the receive ring into *out (1) or 0 when none is complete.
+ * now_ms: the 1 kHz tick, for the inter-byte timeout. */
+uint8_t link_poll(frame_t *out, uint16_t now_ms);
+/* Bytes received since the last call (for the per-byte cycle statistic). */
+uint8_t link_take_new_bytes(void);
+/* 1 while bytes arrived that link_take_new_bytes() has not reported yet. */
+uint8_t link_rx_new(void);
+/* Queue one frame for transmission (blocks while the transmit ring is full). */
+void link_send(uint8_t type, uint8_t seq, const uint8_t *payload, uint8_t len);
+uint8_t link_rx_overflowed(void);   /* 1 once since the last call if the receive ring overflowed */
+
+#endif

@@ -1,0 +1,360 @@
+"""The Atmega2560 firmware (firmware/) running in simavr, driven through SerialDrive over a pty.
+
+firmware/sim/simdrive runs the compiled firmware, bridges UART0 to a pseudo-terminal and
+prints the motor outputs (PWM compare registers + direction pins) with their simulated
+cycle; its ideal motor model feeds quadrature edges back. Expected values come from the
+Python kinematics (robot.kinematics) and the protocol spec, never from the firmware.
+"""
+from __future__ import annotations
+
+import math
+import re
+import shutil
+import subprocess
+import threading
+import time
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+import pytest
+
+from robot import protocol as P
+from robot.hardware.serial_drive import COUNTS_PER_REV, DriveCommandError, SerialDrive, SerialDriveConfig
+from robot.kinematics import OmniDriveParams, twist_to_wheels
+
+FW = Path(__file__).resolve().parents[1] / "firmware"
+ELF = FW / "build" / "drive.elf"
+SIM = FW / "sim" / "build" / "simdrive"
+F_CPU = 16_000_000
+
+
+def _toolchain_missing() -> str | None:
+    for tool in ("avr-gcc", "make", "cc"):
+        if shutil.which(tool) is None:
+            return f"{tool} not installed (scripts/system-deps.sh installs gcc-avr, avr-libc, simavr)"
+    if not Path("/usr/include/simavr/sim_avr.h").exists():
+        return "simavr headers missing (libsimavr-dev; scripts/system-deps.sh installs it)"
+    return None
+
+
+_MISSING = _toolchain_missing()
+pytestmark = pytest.mark.skipif(_MISSING is not None, reason=str(_MISSING))
+
+
+@dataclass(frozen=True)
+class PwmEvent:
+    cycle: int            # when the outputs last changed
+    duty: tuple           # signed duty per channel (sign from the direction pin)
+    rx_cycle: int         # when the last UART byte before it was received
+
+    @property
+    def latency_cycles(self) -> int:
+        return self.cycle - self.rx_cycle
+
+
+class SimBoard:
+    """One simulated board: the harness process and its parsed stdout."""
+
+    def __init__(self, *args: str):
+        self.proc = subprocess.Popen([str(SIM), "--cpr", str(COUNTS_PER_REV), *args, str(ELF)],
+                                     stdout=subprocess.PIPE, stderr=open("/tmp/simdrive_stderr.txt", "w"), text=True)
+        first = self.proc.stdout.readline().split()
+        assert first and first[0] == "PTY", f"harness did not start: {first} {self.proc.stderr.read()}"
+        self.port = first[1]
+        self.pwm: list[PwmEvent] = []
+        self.enc: list[tuple[int, tuple[int, int, int]]] = []
+        self.wdt: list[tuple[int, int]] = []
+        self._reader = threading.Thread(target=self._read, daemon=True)
+        self._reader.start()
+
+    def _read(self):
+        for line in self.proc.stdout:
+            f = line.split()
+            if f[:1] == ["PWM"]:
+                c, d0, d1, d2, dirs, rx = (int(x) for x in f[1:7])
+                duty = tuple(d if dirs >> i & 1 else -d for i, d in enumerate((d0, d1, d2)))
+                self.pwm.append(PwmEvent(c, duty, rx))
+            elif f[:1] == ["ENC"]:
+                self.enc.append((int(f[1]), tuple(int(x) for x in f[2:5])))
+            elif f[:1] == ["WDT"]:
+                self.wdt.append((int(f[1]), int(f[2])))
+
+    def wait_pwm(self, n_before: int, timeout: float = 1.0) -> PwmEvent:
+        """The first PWM event after the first ``n_before`` ones."""
+        deadline = time.monotonic() + timeout
+        while len(self.pwm) <= n_before:
+            assert time.monotonic() < deadline, "no PWM change reported"
+            time.sleep(0.002)
+        return self.pwm[n_before]
+
+    def settle(self, quiet: float = 0.03, timeout: float = 2.0) -> int:
+        """Wait until no PWM change arrived for ``quiet`` s; the number of events so far."""
+        deadline = time.monotonic() + timeout
+        n = -1
+        while n != len(self.pwm) and time.monotonic() < deadline:
+            n = len(self.pwm)
+            time.sleep(quiet)
+        return n
+
+    def close(self):
+        self.proc.terminate()
+        try:
+            self.proc.wait(5)
+        except subprocess.TimeoutExpired:
+            self.proc.kill()
+
+
+@pytest.fixture(scope="module")
+def built():
+    r = subprocess.run(["make", "-C", str(FW), "all", "sim"], capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stdout + r.stderr
+    return r.stdout
+
+
+@pytest.fixture(scope="module")
+def board(built):
+    b = SimBoard()
+    yield b
+    b.close()
+
+
+@pytest.fixture
+def drive(board):
+    d = SerialDrive(board.port, SerialDriveConfig(keepalive=None, connect_timeout=3.0))
+    board.settle()
+    yield d
+    d.close()
+
+
+def expected_duty(twist, params=OmniDriveParams()) -> np.ndarray:
+    """Python IK -> signed duty counts, as the firmware documents it."""
+    return twist_to_wheels(twist, params) / params.max_wheel_speed * P.PWM_TOP
+
+
+# --------------------------------------------------------------------------- static checks
+def test_firmware_constants_match_python(built):
+    cfg = (FW / "src" / "config.h").read_text()
+    val = {k: float(v) for k, v in re.findall(r"#define\s+(\w+)\s+([-\d.]+)f?u?L?\b", cfg)}
+    p = OmniDriveParams()
+    assert val["WHEEL_RADIUS_M"] == pytest.approx(p.wheel_radius)
+    assert val["BASE_RADIUS_M"] == pytest.approx(p.base_radius)
+    assert [val[f"WHEEL{i}_ANGLE_DEG"] for i in range(3)] == pytest.approx(np.rad2deg(p.wheel_angles))
+    assert val["MAX_WHEEL_SPEED"] == pytest.approx(p.max_wheel_speed)
+    assert val["PWM_TOP"] == P.PWM_TOP
+    assert val["CMD_TIMEOUT_MS"] / 1000 == pytest.approx(P.COMMAND_TIMEOUT_S)
+    assert val["ENC_WINDOW_MS"] / 1000 == pytest.approx(P.ENCODER_WINDOW_S)
+    proto = (FW / "src" / "protocol.h").read_text()
+    for t in P.MsgType:
+        assert re.search(rf"MSG_{t.name}\s*=\s*0x{t.value:02X}", proto), t.name
+    for f_, name in P.FAULT_NAMES.items():
+        assert re.search(rf"FAULT_{name.upper()}\s*=\s*1u << {int(f_).bit_length() - 1}\b", proto), name
+
+
+# --------------------------------------------------------------------------- link
+def test_ping_round_trip(board, drive):
+    rtt = drive.ping(0x12345678)
+    pong = drive.board
+    assert pong.nonce == 0x12345678 and pong.protocol_version == P.PROTOCOL_VERSION
+    assert pong.firmware_version == 0x0100 and pong.pwm_top == P.PWM_TOP
+    assert 0 < rtt < 0.1
+    up0 = pong.uptime_ms
+    time.sleep(0.05)
+    drive.ping()
+    assert drive.board.uptime_ms >= up0 + 40          # the MCU clock runs ~ in step with ours
+
+
+def test_twist_and_heading_pwm_match_python_ik(board, drive):
+    cases = [
+        ("twist", (0.20, 0.0, 0.0)),
+        ("twist", (0.0, -0.15, 0.0)),
+        ("twist", (0.0, 0.0, 1.2)),
+        ("twist", (0.3, 0.1, -0.8)),
+        ("twist", (-0.25, 0.2, 0.5)),
+        ("twist", (2.0, 1.0, 3.0)),                     # saturates: scaled to 20 rad/s, direction kept
+        ("heading", (math.radians(-4.0), 0.3)),         # the paper's azimuth command
+        ("heading", (math.radians(145.0), 0.5)),
+        ("heading", (math.radians(-135.0), 0.4)),
+    ]
+    worst = 0.0
+    for kind, args in cases:
+        n = len(board.pwm)
+        if kind == "twist":
+            drive.set_twist(*args)
+            twist = args
+        else:
+            drive.set_heading(*args)
+            az = round(args[0] * 1000) / 1000             # what went over the wire (mrad, mm/s)
+            twist = (args[1] * math.cos(az), args[1] * math.sin(az), 0.0)
+        ev = board.wait_pwm(n)
+        want = expected_duty(twist)
+        err = np.abs(np.array(ev.duty) - want)
+        worst = max(worst, float(err.max()))
+        assert err.max() <= 0.51, f"{kind}{args}: firmware {ev.duty}, python IK {np.round(want, 2)}"
+        assert np.all(np.sign(ev.duty) == np.sign(np.round(want))), (ev.duty, want)
+        limited = bool(drive.telemetry().faults & P.Fault.SPEED_LIMITED)
+        assert limited == (np.abs(twist_to_wheels(twist) - OmniDriveParams().jacobian @ twist).max() > 1e-9)
+    drive.stop()
+    print(f"worst |duty - IK| = {worst:.3f} counts of {P.PWM_TOP}")
+
+
+def test_stop_acts_at_once(board, drive):
+    n = len(board.pwm)
+    drive.set_twist(0.3, 0.0, 0.5)
+    assert board.wait_pwm(n).duty != (0, 0, 0)
+    n += 1
+    drive.stop()
+    ev = board.wait_pwm(n)
+    assert ev.duty == (0, 0, 0)                        # straight to zero, no ramp
+    assert ev.latency_cycles < 0.001 * F_CPU           # within 1 ms of the STOP frame's last byte
+    time.sleep(0.05)
+    assert len(board.pwm) == n + 1
+
+
+def test_keepalive_holds_and_watchdog_ramps_down(board, built):
+    with SerialDrive(board.port, SerialDriveConfig(keepalive=0.1)) as d:
+        n = board.settle()
+        d.set_twist(0.0, 0.0, 4.0)                     # all wheels +10 rad/s: duty 200
+        time.sleep(0.6)                                # twice the watchdog time, kept alive
+        assert [e.duty for e in board.pwm[n:]] == [(200, 200, 200)]
+        assert not d.status().faults
+        d.stop()
+
+    with SerialDrive(board.port, SerialDriveConfig(keepalive=None)) as d:
+        n = board.settle()
+        d.set_twist(0.0, 0.0, -4.0)
+        deadline = time.monotonic() + 5.0              # no command for > 300 ms + 50 ms ramp
+        while not (len(board.pwm) > n + 1 and board.pwm[-1].duty == (0, 0, 0)):
+            assert time.monotonic() < deadline, "motors not ramped down"
+            time.sleep(0.02)
+        ev = board.pwm[n:]
+        assert ev[0].duty == (-200, -200, -200)
+        t_cmd = ev[0].rx_cycle
+        ramp = ev[1:]
+        assert ramp and ramp[-1].duty == (0, 0, 0)
+        start = (ramp[0].cycle - t_cmd) / F_CPU
+        assert 0.300 <= start <= 0.3015, start         # ramp begins 300..301 ms (1 ms tick) after it
+        mags = [abs(e.duty[0]) for e in ramp]
+        assert mags == list(range(196, -1, -4))       # 4 counts per ms down to zero
+        steps = np.diff([e.cycle for e in ramp]) / F_CPU
+        assert np.allclose(steps, 0.001, atol=6e-5)    # tick ISR latency jitter (<1000 cycles)
+        st = d.status()
+        assert "cmd_timeout" in st.faults
+        d.set_twist(0.1, 0.0, 0.0)                     # the next command clears it
+        assert "cmd_timeout" not in d.status().faults
+        d.stop()
+
+
+def test_garbage_and_corrupt_frames_are_rejected_and_counted(board, drive):
+    t0 = drive.telemetry()
+    ser = drive._ser
+    rng = np.random.default_rng(7)
+    garbage = rng.integers(0, 256, 300, dtype=np.uint8)
+    garbage = bytes(garbage[garbage != P.SOF][:250])  # no start byte: all dropped
+    bad_crc = bytearray(P.encode(P.SetTwist(500, 0, 0), 1))
+    bad_crc[-1] ^= 0x5A
+    too_long = bytes([P.SOF, 200, 0x02, 0x00])         # LEN > 16
+    truncated = P.encode(P.SetTwist(0, 500, 0), 2)[:7]
+    # garbage, a bad CRC, a bad length, then a valid command in the same write: still executed
+    n = len(board.pwm)
+    drive._write(garbage + bytes(bad_crc) + too_long)
+    drive.set_twist(0.1, 0.0, 0.0)
+    ev = board.wait_pwm(n)
+    assert np.abs(np.array(ev.duty) - expected_duty((0.1, 0.0, 0.0))).max() <= 0.51
+    # a truncated frame is abandoned after the 5 ms inter-byte timeout, then commands work
+    ser.write(truncated)
+    ser.flush()
+    time.sleep(0.05)
+    drive.stop()
+    t1 = drive.telemetry()
+
+    def d(field):
+        return (getattr(t1, field) - getattr(t0, field)) % 65536
+
+    # the same byte stream through the Python reference parser (MCU limits) gives the counts
+    ref = P.FrameParser(max_payload=P.MCU_MAX_PAYLOAD)
+    got = ref.feed(garbage + bytes(bad_crc) + too_long + P.encode(P.SetTwist(100, 0, 0), 3) + truncated)
+    got += ref.drop_partial()                          # the inter-byte timeout
+    got += ref.feed(P.encode(P.Stop(), 4) + P.encode(P.GetTelemetry(), 5))
+    assert ref.crc_errors == 1 and ref.length_errors == 1 and ref.timeouts == 1 and len(got) == 3
+    assert d("crc_errors") == ref.crc_errors
+    assert d("length_errors") == ref.length_errors
+    assert d("timeouts") == ref.timeouts
+    assert d("dropped_bytes") == ref.dropped_bytes
+    assert d("rx_frames") == len(got) and d("naks") == 0
+    assert t1.rx_overflows == 0
+
+
+def test_nak_reasons(board, drive):
+    with pytest.raises(DriveCommandError) as e:
+        drive._transact(P.SetHeading(4000, 100, 0), P.MsgType.ACK)
+    assert e.value.reason == P.NakReason.BAD_VALUE
+    with pytest.raises(DriveCommandError) as e:
+        drive._transact(P.Pong(), P.MsgType.ACK)      # an MCU->host type sent to the MCU
+    assert e.value.reason == P.NakReason.UNKNOWN_TYPE
+
+    # a CRC-valid SET_TWIST with a 2-byte payload
+    seq = 99
+    drive._write(P.build_frame(P.MsgType.SET_TWIST, seq, b"\x00\x01"))
+    reply = drive._await_reply(seq, time.monotonic() + 0.5)
+    assert reply == P.Nak(P.MsgType.SET_TWIST, P.NakReason.BAD_LENGTH)
+    assert drive.telemetry().naks >= 3
+
+
+def test_encoders_and_odometry_follow_the_wheels(board, built):
+    params = OmniDriveParams()
+    twist = (0.15, -0.1, 0.6)
+    with SerialDrive(board.port, SerialDriveConfig(keepalive=0.1)) as d:
+        a0 = d.odometry().wheel_angles
+        d.set_twist(*twist)
+        time.sleep(0.5)
+        odo = d.odometry()
+        t = d.telemetry()
+        time.sleep(0.12)                                # keep moving past the model's next report
+        d.stop()
+    k = 2 * np.pi / COUNTS_PER_REV
+    want = twist_to_wheels(twist, params)
+    # speed over the last 50 ms window: duty quantisation (0.05 rad/s) + one count per window
+    assert np.allclose(odo.wheel_speeds, want, atol=0.05 + k / P.ENCODER_WINDOW_S + 1e-9)
+    assert np.all(np.sign(odo.wheel_angles - a0) == np.sign(want))
+    # the firmware's counts equal the motor model's (the harness's truth) at that time
+    at = t.uptime_ms * F_CPU / 1000
+    deadline = time.monotonic() + 1.0
+    while board.enc[-1][0] < at + 0.002 * F_CPU:       # wait for the model's report after that time
+        assert time.monotonic() < deadline
+        time.sleep(0.01)
+    cyc = np.array([c for c, _ in board.enc], dtype=float)
+    model = np.array([c for _, c in board.enc], dtype=float)
+    truth = [np.interp(at, cyc, model[:, i]) for i in range(3)]
+    peak_rate = np.abs(want).max() / k                  # counts/s
+    assert np.abs(np.array(t.encoder_counts) - truth).max() <= 2 + 0.002 * peak_rate
+    assert not t.faults & P.Fault.ENCODER_ERROR
+
+
+def test_hardware_watchdog_is_enabled_and_kept(board, drive):
+    assert board.wdt, "harness reported no WDTCSR state"
+    wdtcsr = board.wdt[-1][1]
+    assert wdtcsr & 0x08, f"WDE not set: WDTCSR=0x{wdtcsr:02X}"
+    assert (wdtcsr & 0x07) | ((wdtcsr >> 5 & 1) << 3) == 3, "expected the 120 ms prescaler"
+    up0 = drive.telemetry().uptime_ms
+    time.sleep(0.3)
+    t = drive.telemetry()
+    assert t.uptime_ms >= up0 + 250                  # no watchdog reset in between
+    assert not t.faults & P.Fault.WDT_RESET
+
+
+def test_stalled_wheel_is_reported(built):
+    b = SimBoard("--stall", "1")
+    try:
+        with SerialDrive(b.port, SerialDriveConfig(keepalive=0.1)) as d:
+            d.set_twist(0.0, 0.0, 3.0)                 # every wheel at 7.5 rad/s: 37.5 % duty
+            assert not d.status().stalled
+            deadline = time.monotonic() + 5.0
+            while not (st := d.status()).stalled:       # 500 ms without an edge (simulated time)
+                assert time.monotonic() < deadline, "stall not reported"
+                time.sleep(0.05)
+            assert not st.ok
+            tel = d.telemetry()
+            assert tel.encoder_counts[1] == 0 and tel.encoder_counts[0] > 0
+    finally:
+        b.close()
