@@ -85,7 +85,8 @@ def main() -> None:
     dense = speed(load_scene("dense_collapsed_room"), 60.0)
     track = tracking()
     odo_ramp, odo_step = odometry(True), odometry(False)
-    print(f"mujoco {mujoco.__version__}, timestep {SimRobot().timestep * 1e3:.1f} ms, {platform.processor() or platform.machine()}")
+    cpu = platform.processor() or platform.machine()
+    print(f"mujoco {mujoco.__version__}, timestep {SimRobot().timestep * 1e3:.1f} ms, {cpu}")
     print(f"{'case':24s} {'speed':>8s} {'us/step':>8s} {'collide':>8s} {'solve':>8s} {'contacts':>9s}")
     for name, r in (("robot alone", alone), ("dense_collapsed_room", dense)):
         u = r["us_per_step"]

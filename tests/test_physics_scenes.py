@@ -76,7 +76,8 @@ def test_victims_can_be_on_beside_or_under_rubble():
     for seed in range(12):
         w = generate_world(SMALL, seed=seed)
         for v in w.victims:
-            above = [b for b in w.obstacles if not b.climbable and b.contains([v.position[0], v.position[1], b.center[2]])]
+            x, y, _ = v.position
+            above = [b for b in w.obstacles if not b.climbable and b.contains([x, y, b.center[2]])]
             if not above:
                 modes.add("beside")
             elif all(b.center[2] + b.size[2] / 2 < v.position[2] for b in above):

@@ -69,7 +69,8 @@ class RubbleConfig:
             raise ValueError(f"rubble.debris_height: expected 0 < low <= high <= 0.03 m, got {self.debris_height}")
         bad = set(self.victim_modes) - {"on", "beside", "under"}
         if bad or not self.victim_modes:
-            raise ValueError(f"rubble.victim_modes: expected some of ('on', 'beside', 'under'), got {self.victim_modes}")
+            raise ValueError("rubble.victim_modes: expected some of ('on', 'beside', 'under'), "
+                             f"got {self.victim_modes}")
         if min(self.room_size[:2]) < 2 * (ROBOT_RADIUS + self.start_clearance) + 0.2:
             raise ValueError(f"rubble.room_size: room too small for the robot, got {self.room_size}")
 
@@ -252,7 +253,8 @@ class _Builder:
                 roof = roofs[int(rng.integers(len(roofs)))]
                 # Lying in the void with the head near an open side: half covered.
                 gap = roof.center[2] - roof.size[2] / 2
-                local = np.array([rng.uniform(-0.15, 0.15), rng.choice([-1, 1]) * roof.size[1] / 2 * rng.uniform(0.5, 0.9)])
+                along = rng.uniform(-0.15, 0.15)
+                local = np.array([along, rng.choice([-1, 1]) * roof.size[1] / 2 * rng.uniform(0.5, 0.9)])
                 xy = np.asarray(roof.center[:2]) + roof.rotation[:2, :2] @ local
                 z = min(0.15, gap - 0.05)
                 return VictimSite((_r(xy[0]), _r(xy[1]), _r(z)), buried=float(np.round(rng.uniform(0.4, 0.8), 2)))

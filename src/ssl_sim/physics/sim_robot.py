@@ -77,7 +77,8 @@ class SimRobot:
                  timestep: float = rm.DEFAULT_TIMESTEP, start: tuple[float, float, float] | None = None,
                  bumper_threshold: float = 1.0) -> None:
         if not 0 < timestep <= config.contact_timeconst / 2:
-            raise ValueError(f"timestep: expected 0 < timestep <= contact_timeconst / 2 = {config.contact_timeconst / 2} s "
+            raise ValueError("timestep: expected 0 < timestep <= contact_timeconst / 2 = "
+                             f"{config.contact_timeconst / 2} s "
                              f"(validated at {rm.DEFAULT_TIMESTEP}), got {timestep}")
         self.world, self.config = world, config
         if world is None:
@@ -200,7 +201,8 @@ class SimRobot:
         """Ground-truth (vx, vy, omega_z) of the base in its own frame (m/s, m/s, rad/s)."""
         self._sync()
         v = np.zeros(6)
-        mujoco.mj_objectVelocity(self.model, self.data, mujoco.mjtObj.mjOBJ_XBODY, self._base, v, 1)  # XBODY: body frame, not inertial frame
+        # XBODY: the body frame (mjOBJ_BODY would be the principal-inertia frame).
+        mujoco.mj_objectVelocity(self.model, self.data, mujoco.mjtObj.mjOBJ_XBODY, self._base, v, 1)
         return np.array([v[3], v[4], v[2]])
 
     def wheel_odometry(self) -> WheelOdometry:
