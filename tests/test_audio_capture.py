@@ -267,3 +267,23 @@ def test_array_capture_errors_are_clear(monkeypatch):
     monkeypatch.setitem(sys.modules, "sounddevice", None)  # as if not installed
     with pytest.raises(ImportError, match=r"pip install 'ssl-rescue\[hardware\]'"):
         import_sounddevice()
+
+
+def test_capture_tracks_a_drifting_offset():
+    # Device 1 slips by 3 samples half way (e.g. clock drift): tracking re-measures near the offset.
+    truth = 0.3 * _plane_wave(_unit(60, -10), 4 * FS, seed=4) / 4
+    a = _devices(truth, 200)
+    b = _devices(truth, 203)
+    half = 2 * FS
+    dev = [a[0], np.concatenate([a[1][:, :half], b[1][:, half:]], axis=1)]
+    sd = _FakeSD(dev)
+    cap = ArrayCapture((1, 2), FS, positions=G.positions, blocksize=512, track_every_s=0.5, backend=sd)
+    cap.merger.set_offset(200)
+    got = 0
+    while got < 3 * FS:
+        got += cap.read(1024).samples.shape[1]
+    assert cap.merger.offset == 203
+    block = cap.read(4000)
+    start = cap.merger.cursor - 4000
+    np.testing.assert_array_equal(block.samples, (truth[:, start:start + 4000] * 32767).astype(np.int16))
+    cap.close()

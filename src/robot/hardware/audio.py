@@ -499,10 +499,15 @@ class ArrayCapture(AudioSource):
         if self.track_every_s is not None and self.merger.positions is not None \
                 and self._since_track >= self.track_every_s * self._rate:
             self._since_track = 0
-            try:
-                self.merger.calibrate(window_s=0.5, search_s=0.002)
+            try:  # clock drift: re-measure near the current offset whenever a coherent sound is present
+                est = self.merger.estimate_offset(window_s=0.5, search_s=0.002)
             except ValueError as exc:
                 log.debug("offset tracking skipped: %s", exc)
+            else:
+                if est.confident and est.offset != self.merger.offset:
+                    log.info("device offset drifted %d -> %s", self.merger.offset, est)
+                    self.merger.set_offset(est.offset)
+                    self.merger.estimate = est
         return AudioBlock(out, self._rate, t)
 
     def _get(self, d: int):
