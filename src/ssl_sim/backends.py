@@ -1,0 +1,147 @@
+"""Simulation HAL backends: the MuJoCo robot and the acoustic simulator behind ``robot.hal``.
+
+``SimAudioSource`` is the microphone array of a :class:`~ssl_sim.physics.SimRobot`: reading
+``n`` samples advances the physics by ``n / fs`` seconds (the robot keeps doing what the drive
+was last told) and renders what the microphones hear over that interval with an
+:class:`~ssl_sim.acoustics.AcousticSimulator`, at the microphones' world positions taken from
+the MuJoCo model. Together with ``SimDriveBase`` and ``SimClock`` (``ssl_sim.physics``) the
+rescue behaviour runs on simulated time, deterministically and as fast as the CPU allows::
+
+    hal = make_sim_hal(world, acoustic_config=AcousticConfig(seed=1))
+    behaviour = RescueBehaviour(hal.audio, hal.drive, hal.clock, localizer, start_pose=world.robot_start)
+
+Time: one timeline for both. Audio sample ``k`` is at simulated time ``k / fs``; a read starts
+at the physics time rounded to a sample and ends when the physics reaches the block's end
+(within half a physics step; no drift accumulates).
+
+Moving while listening: the physics is stepped first, recording the microphone positions every
+``chunk_s``; if the array moved less than ``still_tolerance_m`` the whole block is rendered at
+one pose (one FFT convolution, RIRs cached per pose), otherwise each chunk is rendered at its
+own pose (piecewise-constant receiver positions, the usual moving-receiver approximation).
+"""
+from __future__ import annotations
+
+from dataclasses import dataclass
+from typing import Sequence
+
+import numpy as np
+
+from robot.hal import AudioBlock, AudioSource
+from ssl_sim.acoustics import AcousticConfig, AcousticSimulator, SoundSource
+from ssl_sim.physics import SimClock, SimDriveBase, SimRobot
+from ssl_sim.world import World
+
+__all__ = ["SimAudioSource", "SimHal", "make_sim_hal", "array_frame_directions"]
+
+
+class SimAudioSource(AudioSource):
+    """The simulated array of ``robot`` in the world of ``acoustics`` (see the module docstring).
+
+    ``chunk_s``: pose sampling interval (s) while the robot moves during a read.
+    ``still_tolerance_m``: largest microphone displacement (m) during a block that still
+    counts as standing still (MuJoCo contacts let a parked robot creep by micrometres).
+    ``on_block``: optional callback ``(block, mic_positions_world)`` after every read
+    (instrumentation: visualisation, timing); ``mic_positions_world`` is (n_chunks, n_mics, 3).
+    """
+
+    def __init__(self, robot: SimRobot, acoustics: AcousticSimulator, chunk_s: float = 0.05,
+                 still_tolerance_m: float = 1e-3, on_block=None) -> None:
+        if robot.world is not None and acoustics.world is not robot.world and acoustics.world != robot.world:
+            raise ValueError("SimAudioSource: robot and acoustics must simulate the same World")
+        if not chunk_s > 0:
+            raise ValueError(f"chunk_s: expected > 0 s, got {chunk_s}")
+        if not still_tolerance_m >= 0:
+            raise ValueError(f"still_tolerance_m: expected >= 0 m, got {still_tolerance_m}")
+        self.robot, self.acoustics = robot, acoustics
+        self.chunk_s, self.still_tolerance_m = float(chunk_s), float(still_tolerance_m)
+        self.on_block = on_block
+        self._n_mics = robot.mic_positions().shape[0]
+        self.blocks_read = 0
+        self.moving_blocks = 0
+
+    @property
+    def sample_rate(self) -> int:
+        return int(self.acoustics.config.fs)
+
+    @property
+    def n_channels(self) -> int:
+        return self._n_mics
+
+    def read(self, n_samples: int) -> AudioBlock:
+        """``n_samples`` per channel from now on; advances the physics to the block's end."""
+        n = int(n_samples)
+        if n <= 0:
+            raise ValueError(f"n_samples: expected > 0, got {n_samples}")
+        fs = self.sample_rate
+        n0 = int(round(self.robot.time * fs))
+        chunk = max(1, int(round(self.chunk_s * fs)))
+        bounds = list(range(0, n, chunk)) + [n]
+        mics = [self.robot.mic_positions()]
+        for a, b in zip(bounds[:-1], bounds[1:]):
+            self._step_to((n0 + b) / fs)
+            mics.append(self.robot.mic_positions())
+        traj = np.stack(mics)  # poses at the chunk boundaries (n_chunks + 1, n_mics, 3)
+        moved = float(np.max(np.linalg.norm(traj - traj[0], axis=-1)))
+        if moved <= self.still_tolerance_m:
+            x = self.acoustics.listen(traj[0], n / fs, n0 / fs)
+            used = traj[:1]
+        else:
+            self.moving_blocks += 1
+            # Each chunk at the pose in its middle (mean of its end poses).
+            used = 0.5 * (traj[:-1] + traj[1:])
+            x = np.concatenate([self.acoustics.listen(used[i], (b - a) / fs, (n0 + a) / fs)
+                                for i, (a, b) in enumerate(zip(bounds[:-1], bounds[1:]))], axis=1)
+        self.blocks_read += 1
+        block = AudioBlock(x, fs, n0 / fs)
+        if self.on_block is not None:
+            self.on_block(block, used)
+        return block
+
+    def _step_to(self, t_end: float) -> None:
+        dt = self.robot.timestep
+        steps = int(round((t_end - self.robot.time) / dt))
+        if steps > 0:
+            self.robot.step(steps * dt)
+
+    def flush(self) -> None:
+        """Nothing is buffered: a simulated array renders from the current physics time on."""
+
+
+def array_frame_directions(robot: SimRobot, points_world) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+    """Azimuth, elevation (rad) and distance (m) of world points ``(k, 3)`` seen from the array
+    centre, in the ARRAY frame of the robot's current (ground-truth, possibly tilted) pose."""
+    origin, rot = robot.array_pose()
+    d = (np.asarray(points_world, float).reshape(-1, 3) - origin) @ rot  # world -> array: R^T (p - o)
+    r = np.linalg.norm(d, axis=1)
+    az = np.arctan2(d[:, 1], d[:, 0])
+    el = np.arcsin(np.clip(d[:, 2] / np.maximum(r, 1e-12), -1.0, 1.0))
+    return az, el, r
+
+
+@dataclass
+class SimHal:
+    """The simulated robot's HAL: ``audio``, ``drive`` and ``clock`` share ``robot`` (and its time)."""
+
+    robot: SimRobot
+    acoustics: AcousticSimulator
+    audio: SimAudioSource
+    drive: SimDriveBase
+    clock: SimClock
+
+    def close(self) -> None:
+        self.drive.close()
+        self.audio.close()
+
+
+def make_sim_hal(world: World, sources: Sequence[SoundSource] | None = None,
+                 acoustic_config: AcousticConfig | None = None, start: tuple[float, float, float] | None = None,
+                 robot: SimRobot | None = None, chunk_s: float = 0.05) -> SimHal:
+    """Robot, acoustics and the three HAL backends for ``world``.
+
+    ``sources``: sound sources (default: the world's victims with the config's default voices).
+    ``start``: robot start pose (x, y, yaw) in the world (default ``world.robot_start``).
+    ``robot``: an existing SimRobot of the same world to reuse instead of building one."""
+    robot = robot if robot is not None else SimRobot(world, start=start)
+    acoustics = AcousticSimulator(world, acoustic_config, sources=sources)
+    return SimHal(robot, acoustics, SimAudioSource(robot, acoustics, chunk_s=chunk_s), SimDriveBase(robot),
+                  SimClock(robot))
