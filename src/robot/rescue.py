@@ -11,7 +11,7 @@ made robust for a mission with several victims:
   of the stored position from the current pose);
 * **choose** the target: the highest-energy source (as in the paper), but
   voice-like sources (``robot.voice``) first, and the current target kept
-  unless another is ``switch_ratio`` louder (no dithering between two voices);
+  unless another is ``switch_ratio_db`` louder (no dithering between two voices);
 * **found** when the victim is close, by one of three stated criteria:
   (1) the detection's elevation is steeper than ``found_elevation_deg`` below
   the horizon (the array is ``array_height_m`` above the floor and a lying
@@ -19,7 +19,9 @@ made robust for a mission with several victims:
   (2) elevation steeper than ``corroborated_elevation_deg`` *and* the level
   rose by ``level_rise_db`` since the target was acquired, or (3) the bumper
   fires while driving at a target that is ahead and close by (1)-(2)'s
-  measures (range estimate <= ``bump_found_range_m`` or the level rise);
+  measures (range estimate <= ``bump_found_range_m`` or the level rise).
+  A non-voice source that is approached (nothing better was heard) is
+  "found" the same way; ``FoundVictim.voice`` tells them apart;
 * **turn** toward its azimuth and **drive** a step (shorter when the range
   estimate from the elevation says it is near), with odometry feedback;
 * **recover** from a bump (not at a victim) or a wheel stall: back off,
