@@ -33,6 +33,8 @@ def _toolchain_missing() -> str | None:
     for tool in ("avr-gcc", "make", "cc"):
         if shutil.which(tool) is None:
             return f"{tool} not installed (scripts/system-deps.sh installs gcc-avr, avr-libc, simavr)"
+    if not Path("/usr/lib/avr/include/avr/io.h").exists():
+        return "avr-libc not installed (scripts/system-deps.sh installs it)"
     if not Path("/usr/include/simavr/sim_avr.h").exists():
         return "simavr headers missing (libsimavr-dev; scripts/system-deps.sh installs it)"
     return None
@@ -58,7 +60,7 @@ class SimBoard:
 
     def __init__(self, *args: str):
         self.proc = subprocess.Popen([str(SIM), "--cpr", str(COUNTS_PER_REV), *args, str(ELF)],
-                                     stdout=subprocess.PIPE, stderr=open("/tmp/simdrive_stderr.txt", "w"), text=True)
+                                     stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
         first = self.proc.stdout.readline().split()
         assert first and first[0] == "PTY", f"harness did not start: {first} {self.proc.stderr.read()}"
         self.port = first[1]

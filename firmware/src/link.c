@@ -15,10 +15,10 @@ static volatile uint8_t rx_buf[256];
 static volatile uint8_t rx_head, rx_tail;
 static volatile uint16_t rx_last_ms;         /* tick of the last received byte */
 static volatile uint8_t rx_overflow_flag;
-static uint8_t rx_seen;                      /* rx_head at the last link_take_new_bytes() */
+static uint8_t rx_seen;                      /* rx_head at the last link_rx_mark_seen() */
 
-static volatile uint8_t tx_buf[128];
-static volatile uint8_t tx_head, tx_tail;    /* 7-bit ring */
+static volatile uint8_t tx_buf[256];        /* 4 telemetry replies; commands wait here only under a request flood */
+static volatile uint8_t tx_head, tx_tail;
 
 extern volatile uint16_t g_ms;               /* main.c: 1 kHz tick */
 
@@ -62,12 +62,12 @@ ISR(USART0_UDRE_vect)
         return;
     }
     UDR0 = tx_buf[tx_tail];
-    tx_tail = (uint8_t)((tx_tail + 1) & 0x7F);
+    tx_tail = (uint8_t)(tx_tail + 1);
 }
 
 static void tx_put(uint8_t b)
 {
-    uint8_t next = (uint8_t)((tx_head + 1) & 0x7F);
+    uint8_t next = (uint8_t)(tx_head + 1);
     while (next == tx_tail) {
         /* ring full: the UDRE interrupt drains it (never called with interrupts off) */
     }
@@ -94,12 +94,9 @@ void link_send(uint8_t type, uint8_t seq, const uint8_t *payload, uint8_t len)
     UCSR0B |= _BV(UDRIE0);
 }
 
-uint8_t link_take_new_bytes(void)
+void link_rx_mark_seen(void)
 {
-    uint8_t h = rx_head;
-    uint8_t n = (uint8_t)(h - rx_seen);
-    rx_seen = h;
-    return n;
+    rx_seen = rx_head;
 }
 
 uint8_t link_rx_new(void)

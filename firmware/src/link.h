@@ -15,9 +15,9 @@ void link_init(void);
 /* Extract the next CRC-valid frame from the receive ring into *out (1) or 0 when none is complete.
  * now_ms: the 1 kHz tick, for the inter-byte timeout. */
 uint8_t link_poll(frame_t *out, uint16_t now_ms);
-/* Bytes received since the last call (for the per-byte cycle statistic). */
-uint8_t link_take_new_bytes(void);
-/* 1 while bytes arrived that link_take_new_bytes() has not reported yet. */
+/* Remember the receive position; link_rx_new() then tells whether bytes arrived since
+ * (the main loop sleeps only if none did). */
+void link_rx_mark_seen(void);
 uint8_t link_rx_new(void);
 /* Queue one frame for transmission (blocks while the transmit ring is full). */
 void link_send(uint8_t type, uint8_t seq, const uint8_t *payload, uint8_t len);

@@ -195,26 +195,22 @@ int main(void)
         if (link_rx_overflowed())
             latched_faults |= FAULT_RX_OVERFLOW;
 
-        /* parse everything received. Parser cycles (incl. rescans, excl. command execution)
-         * are charged to the bytes that arrived since the last pass. */
-        uint8_t new_bytes = link_take_new_bytes();
-        uint16_t parse_acc = 0;
+        /* parse everything received; each parser call (one frame at most, rescans included)
+         * and each command execution is timed with Timer1 */
+        link_rx_mark_seen();              /* bytes arriving from here on keep us awake */
         for (;;) {
             uint16_t t0 = cycles_now();
             uint8_t got = link_poll(&f, now);
-            parse_acc += (uint16_t)(cycles_now() - t0);
+            uint16_t dt = (uint16_t)(cycles_now() - t0);
+            if (dt > max_parse_cycles)
+                max_parse_cycles = dt;
             if (!got)
                 break;
             t0 = cycles_now();
             dispatch(&f);
-            uint16_t dt = (uint16_t)(cycles_now() - t0);
+            dt = (uint16_t)(cycles_now() - t0);
             if (dt > max_cmd_cycles)
                 max_cmd_cycles = dt;
-        }
-        if (new_bytes) {
-            uint16_t per = parse_acc / new_bytes;
-            if (per > max_parse_cycles)
-                max_parse_cycles = per;
         }
 
         /* sleep until the next interrupt unless there is work; sei; sleep is atomic */

@@ -242,7 +242,7 @@ class Telemetry(Message):
     dropped_bytes: int = 0      # bytes skipped while hunting for a start byte
     naks: int = 0               # NAK replies sent
     rx_overflows: int = 0       # bytes lost because the receive ring buffer was full
-    max_parse_cycles: int = 0   # worst CPU cycles spent parsing for one received byte (incl. rescans)
+    max_parse_cycles: int = 0   # worst CPU cycles of one parser call (<= 1 frame, rescans and ISRs incl.)
     max_cmd_cycles: int = 0     # worst CPU cycles to execute one command (IK, PWM update, reply)
 
     @property
