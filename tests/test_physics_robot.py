@@ -224,6 +224,17 @@ def test_bumper_and_contacts_when_driving_into_a_wall():
     assert np.abs(torque).max() == pytest.approx(CFG.motor_max_torque)  # stalled motor saturates
 
 
+def test_step_keeps_simulated_time_with_requested_time(robot):
+    robot.reset()
+    for _ in range(100):
+        robot.step(0.003)  # 1.2 physics steps each
+    assert robot.time == pytest.approx(0.3, abs=robot.timestep / 2)
+    robot.step()
+    assert robot.time == pytest.approx(0.3 + robot.timestep, abs=robot.timestep / 2)
+    with pytest.raises(ValueError, match="duration"):
+        robot.step(-1.0)
+
+
 def test_bad_input_and_instability_are_reported(robot):
     with pytest.raises(ValueError, match="wheel_speeds"):
         robot.set_wheel_speeds([1.0, np.nan, 0.0])

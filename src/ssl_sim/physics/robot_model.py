@@ -162,7 +162,9 @@ def add_robot(spec: mujoco.MjSpec, cfg: RobotModelConfig = RobotModelConfig(),
     """Add the robot to ``spec`` at world pose ``(x, y, yaw)`` (m, m, rad), base frame ``z`` m up.
 
     Adds bodies, joints, actuators ``motor0..2`` (velocity servos, ctrl in rad/s of the
-    wheel, order and sign as ``robot.kinematics``) and sensors (see ``SENSORS``)."""
+    wheel, order and sign as ``robot.kinematics``) and sensors: ``enc_pos{i}``/``enc_vel{i}``
+    (wheel encoders, rad and rad/s), ``motor_torque{i}`` (N m), ``imu_accel`` (m/s^2),
+    ``imu_gyro`` (rad/s), ``imu_quat`` (w, x, y, z) at site ``imu``, ``bumper`` (touch, N)."""
     d = cfg.drive
     R = d.wheel_radius
     x, y, yaw = (float(v) for v in pose)
@@ -237,8 +239,8 @@ def add_robot(spec: mujoco.MjSpec, cfg: RobotModelConfig = RobotModelConfig(),
     _add_sensors(spec, cfg)
 
 
-#: Sensor name -> (type, object type, object name, dimension)
 def _sensor_table(cfg: RobotModelConfig) -> list[tuple[str, mujoco.mjtSensor, mujoco.mjtObj, str]]:
+    """Rows (sensor name, type, object type, object name)."""
     S, O = mujoco.mjtSensor, mujoco.mjtObj
     rows = []
     for i, j in enumerate(WHEEL_JOINTS):

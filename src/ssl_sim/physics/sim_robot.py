@@ -103,6 +103,7 @@ class SimRobot:
         self._sensor = {m.sensor(i).name: slice(m.sensor_adr[i], m.sensor_adr[i] + m.sensor_dim[i])
                         for i in range(m.nsensor)}
         self._stale = False
+        self._requested = 0.0  # simulated time asked for through step(), s
         mujoco.mj_forward(self.model, self.data)
 
     # -- set-up ------------------------------------------------------------------------------
@@ -135,6 +136,7 @@ class SimRobot:
         mujoco.mj_resetData(self.model, self.data)
         mujoco.mj_forward(self.model, self.data)
         self._stale = False
+        self._requested = 0.0
 
     # -- commands -------------------------------------------------------------------------------
     def set_wheel_speeds(self, wheel_speeds) -> np.ndarray:
@@ -161,13 +163,19 @@ class SimRobot:
 
     # -- physics -----------------------------------------------------------------------------------
     def step(self, duration: float | None = None) -> None:
-        """Advance by ``duration`` s (rounded to whole physics steps; one step if None).
+        """Advance by ``duration`` s (one physics step if None). Durations that are not whole
+        steps are rounded, and the rounding is carried over, so requested and simulated time
+        never drift apart by more than half a step.
 
         Raises ``PhysicsError`` on NaN state or MuJoCo instability warnings."""
-        n = 1 if duration is None else int(round(duration / self.timestep))
-        if n < 0:
-            raise ValueError(f"duration: expected >= 0 s, got {duration}")
-        if n == 0:
+        if duration is None:
+            self._requested = self.time + self.timestep
+        else:
+            if not duration >= 0:
+                raise ValueError(f"duration: expected >= 0 s, got {duration}")
+            self._requested += duration
+        n = int(round((self._requested - self.time) / self.timestep))
+        if n <= 0:
             return
         before = self.warning_counts()
         mujoco.mj_step(self.model, self.data, nstep=n)
