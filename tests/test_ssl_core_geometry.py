@@ -125,7 +125,7 @@ def test_gcc_phat_recovers_fractional_delay(delay_samples):
 
 def test_ssl_core_imports_only_numpy_and_scipy():
     allowed = {"numpy", "scipy", "ssl_core", "__future__"}
-    stdlib = {"argparse", "json", "sys", "tomllib", "dataclasses", "itertools", "pathlib", "typing", "math"}
+    stdlib = {"argparse", "json", "sys", "tomllib", "dataclasses", "itertools", "pathlib", "typing", "math", "collections"}
     for path in (SRC / "ssl_core").rglob("*.py"):
         tree = ast.parse(path.read_text())
         for node in ast.walk(tree):

@@ -45,14 +45,18 @@ def phat_normalise(spectra: np.ndarray) -> np.ndarray:
     return spectra / np.maximum(mag, np.finfo(mag.dtype).tiny)
 
 
-def summed_phat_cross_spectra(spectra: np.ndarray, pairs: np.ndarray) -> np.ndarray:
-    """PHAT cross spectra of every pair summed over frames: ``(channels, frames, bins) -> (pairs, bins)``.
+def summed_phat_cross_spectra(spectra: np.ndarray, pairs: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
+    """PHAT cross spectra of every pair summed over frames: ``(channels, frames, bins) -> (pairs, bins)``,
+    each time-frequency bin optionally weighted by ``weights`` (frames, bins).
 
     Since ``X_i X_j* / |X_i X_j*| = (X_i/|X_i|)(X_j/|X_j|)*``, normalising the channels first
     and summing over frames as one batched matrix product per bin costs far less than
     forming every pair's per-frame cross spectrum.
     """
-    y = phat_normalise(spectra).transpose(2, 0, 1)  # (bins, channels, frames)
+    y = phat_normalise(spectra)
+    if weights is not None:
+        y = y * np.sqrt(weights).astype(y.real.dtype)  # each pair product then carries the weight once
+    y = y.transpose(2, 0, 1)  # (bins, channels, frames)
     cov = y @ np.conj(y.transpose(0, 2, 1))  # (bins, channels, channels)
     return cov[:, pairs[:, 0], pairs[:, 1]].T
 

@@ -18,6 +18,7 @@ from scipy.spatial import cKDTree
 from ssl_core.gcc_phat import LagSteering, band_bins, frame_spectra, summed_phat_cross_spectra
 from ssl_core.geometry import ArrayGeometry, get_array
 from ssl_core.grid import SphericalGrid, azimuth_elevation, make_grid
+from ssl_core.noise import NoiseFloor
 from ssl_core.peaks import local_maxima, neighbour_table
 from ssl_core.srp import SOUND_SPEED, SteeringTable, tdoa_table
 
@@ -45,6 +46,11 @@ class LocalizerConfig:
     rel_threshold: float = 0.4            # a detection's power >= this x the strongest
     min_power: float = 0.08               # normalised SRP (1 = perfectly coherent on all pairs)
     min_level_dbfs: float = -85.0         # frames with a quieter band level are ignored (silence)
+    # Weight bins by their power above a minimum-statistics noise floor (see ssl_core.noise):
+    # voices keep their bins, steady noise (pumps, generators) loses its. Off = the paper's plain
+    # SRP-PHAT; steady sources (a loudspeaker playing noise) are then localizable too.
+    noise_suppression: bool = False
+    noise_memory_s: float = 1.5           # how far back the noise floor looks
     upsample: int = 4                     # GCC interpolation factor
     sound_speed: float = SOUND_SPEED      # m/s
 
@@ -64,6 +70,7 @@ class LocalizerConfig:
         need(0 <= self.rel_threshold <= 1, "rel_threshold", "a fraction in [0, 1]")
         need(self.upsample >= 1, "upsample", "an integer >= 1")
         need(self.sound_speed > 0, "sound_speed", "> 0 m/s")
+        need(self.noise_memory_s > 0, "noise_memory_s", "> 0 s")
         if self.n_sources > 1:
             need(self.min_separation_deg >= 2 * self.coarse_resolution_deg, "min_separation_deg",
                  f">= 2 x coarse_resolution_deg = {2 * self.coarse_resolution_deg:g} degrees: the coarse grid is "
@@ -131,6 +138,8 @@ class Localizer:
         self._fine = SteeringTable(tdoa_f, cfg.fs, cfg.upsample, self._max_lag)
         self._fine_pos = (tdoa_f * cfg.fs * cfg.upsample).astype(np.float32)  # lag of each fine point, per pair
         self._lag_axis = np.arange(-self._max_lag, self._max_lag + 1, dtype=np.float32)
+        chunk_s = cfg.window_frames * cfg.hop / cfg.fs
+        self._noise = NoiseFloor(max(1, int(np.ceil(cfg.noise_memory_s / chunk_s)))) if cfg.noise_suppression else None
         self._lag_steering = LagSteering(self._omega, self._lag_axis / (cfg.fs * cfg.upsample))
         # Masking a found source: half the GCC main lobe, 1 / (2 f_high).
         f_high = cfg.band_hz[1] if cfg.band_hz else cfg.fs / 2
@@ -156,6 +165,8 @@ class Localizer:
         self._pending_ms = np.zeros(0)
         self._start_time = float(start_time)
         self._frames_done = 0  # frames already emitted in windows
+        if getattr(self, "_noise", None) is not None:
+            self._noise.reset()
 
     # ------------------------------------------------------------------ input
     def _check(self, block, fs: int | None) -> np.ndarray:
@@ -225,7 +236,12 @@ class Localizer:
             )
         spec, ms = self._analyse(x)
         t_end = ((ms.size - 1) * self.config.hop + self.config.frame_size) / self.config.fs
-        return self._window_result(spec, ms, t_end)
+        if self._noise is not None:  # a whole recording learns its own floor
+            self._noise.reset()
+        result = self._window_result(spec, ms, t_end)
+        if self._noise is not None:
+            self._noise.reset()
+        return result
 
     def srp_fine(self, result_or_gcc: np.ndarray) -> np.ndarray:
         """SRP power on the whole fine grid for a GCC (pairs, lags) - for plots, not for the hot path."""
@@ -234,7 +250,11 @@ class Localizer:
     def window_gcc(self, recording, fs: int | None = None) -> np.ndarray:
         """Window-summed GCC (pairs, lags) of a recording; use with :meth:`srp_fine` for full-resolution maps."""
         spec, ms = self._analyse(self._check(recording, fs))
-        return self._gcc(spec[:, self._active(ms)])
+        active = self._active(ms)
+        weights = self._bin_weights(spec)
+        if self._noise is not None:
+            self._noise.reset()
+        return self._gcc(spec[:, active], None if weights is None else weights[active])
 
     # ------------------------------------------------------------------ internals
     def _active(self, ms: np.ndarray) -> np.ndarray:
@@ -242,18 +262,30 @@ class Localizer:
             level = 10 * np.log10(ms / _FULL_SCALE_SINE_MS)
         return level >= self.config.min_level_dbfs
 
-    def _gcc(self, spec: np.ndarray) -> np.ndarray:
+    def _gcc(self, spec: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
         """Frame-averaged GCC-PHAT (pairs, lags) of band spectra (channels, frames, bins)."""
-        return self._lag_steering(summed_phat_cross_spectra(spec, self.pairs) / max(spec.shape[1], 1))
+        cross = summed_phat_cross_spectra(spec, self.pairs, weights)
+        return self._lag_steering(cross / max(spec.shape[1], 1))
+
+    def _bin_weights(self, spec: np.ndarray) -> np.ndarray | None:
+        """Noise-suppression weights (frames, bins), updating the floor chunk by chunk as streaming would."""
+        if self._noise is None:
+            return None
+        power = (spec.real**2 + spec.imag**2).mean(axis=0)
+        w = self.config.window_frames
+        return np.concatenate([self._noise.weights(power[k:k + w]) for k in range(0, power.shape[0], w)]) \
+            if power.shape[0] else power
 
     def _window_result(self, spec, ms, t_end: float) -> LocalizationResult:
         active = self._active(ms)
         n_active = int(active.sum())
         if n_active == 0:
+            self._bin_weights(spec)  # the noise floor still learns from quiet windows
             return LocalizationResult(t_end, [], np.zeros(self.coarse_grid.n_points), 0)
         level = float(10 * np.log10(ms[active].mean() / _FULL_SCALE_SINE_MS))
+        weights = self._bin_weights(spec)
         spec_a = spec[:, active]
-        srp_map, peaks = self._search(self._gcc(spec_a))
+        srp_map, peaks = self._search(self._gcc(spec_a, None if weights is None else weights[active]))
         detections = []
         for power, f in peaks:
             u = self.fine_grid.directions[f]
