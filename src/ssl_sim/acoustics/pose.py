@@ -55,15 +55,32 @@ class RobotPose:
 @dataclass(frozen=True)
 class ArrayMount:
     """The array on the robot: ``geometry`` (array frame), cube centre ``height_m`` above the body
-    origin and ``offset_xy_m`` forward/left of it (robot frame, m)."""
+    origin and ``offset_xy_m`` forward/left of it (robot frame, m).
+
+    ``build_error_m``: standard deviation (per axis, m) of where each capsule really sits relative
+    to the nominal geometry - a hand-built cube is off by millimetres; the localizer only knows
+    the nominal positions. The error is fixed per ``build_seed`` (one physical array)."""
 
     geometry: ArrayGeometry = field(default_factory=cube8)
     height_m: float = 0.30
     offset_xy_m: tuple[float, float] = (0.0, 0.0)
+    build_error_m: float = 0.0
+    build_seed: int = 0
 
     def __post_init__(self) -> None:
         if not np.isfinite(self.height_m) or self.height_m <= 0:
             raise ValueError(f"ArrayMount.height_m: expected a height > 0 m, got {self.height_m}")
+        if not np.isfinite(self.build_error_m) or not 0 <= self.build_error_m <= 0.02:
+            raise ValueError(f"ArrayMount.build_error_m: expected 0..0.02 m, got {self.build_error_m}")
+
+    @property
+    def actual_positions(self) -> np.ndarray:
+        """Capsule positions as built (array frame, m): nominal + fixed build error."""
+        pos = np.asarray(self.geometry.positions, float)
+        if self.build_error_m == 0:
+            return pos
+        rng = np.random.default_rng([int(self.build_seed) & 0xFFFFFFFF, 0xB17D])
+        return pos + rng.normal(0.0, self.build_error_m, pos.shape)
 
     @property
     def centre_in_body(self) -> np.ndarray:
@@ -76,7 +93,7 @@ class ArrayMount:
     def mic_positions_world(self, pose: RobotPose) -> np.ndarray:
         """Microphone positions in world coordinates, shape (n_mics, 3) m."""
         r = pose.rotation
-        return self.geometry.transformed(r, pose.position + r @ self.centre_in_body)
+        return self.actual_positions @ r.T + (pose.position + r @ self.centre_in_body)
 
     def direction_in_array_frame(self, pose: RobotPose, point_world) -> tuple[float, float, float]:
         """Azimuth, elevation (rad) and distance (m) of a world point seen from the array centre, array frame."""
