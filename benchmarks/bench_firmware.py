@@ -189,8 +189,7 @@ def main() -> None:
     byte_time = 11 * F_CPU / 117647
     print(f"  one byte lasts {byte_time:.0f} cycles on the wire (115200 Bd, U2X: 117647 Bd)")
     print(f"  firmware's own telemetry: max_parse_cycles {tel.max_parse_cycles} (one call), max_cmd_cycles "
-          f"{tel.max_cmd_cycles} (includes waiting for transmit space while the 'valid frames' flood's "
-          f"replies outrun the line)")
+          f"{tel.max_cmd_cycles}, replies dropped under the 'valid frames' flood: {tel.tx_dropped}")
     print("command -> PWM latency (last byte's RXC to the last output register write), cycles:")
     for k in ("SET_TWIST", "SET_HEADING", "STOP"):
         r = perf[k]

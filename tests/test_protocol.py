@@ -52,7 +52,7 @@ EXAMPLES = [
     P.Ping(0xDEADBEEF), P.SetTwist(-500, 250, 1571), P.SetHeading(-3142, 300, -100), P.Stop(),
     P.GetTelemetry(), P.ClearFaults(int(P.Fault.WDT_RESET)), P.Ack(P.MsgType.SET_TWIST, P.ACK_SPEED_LIMITED),
     P.Nak(0x42, P.NakReason.UNKNOWN_TYPE), P.Pong(7, 1, 0x0102, 123456, 400),
-    P.Telemetry(99, (-2**31, 0, 2**31 - 1), (-5, 0, 5), (-400, 0, 400), 0x41, *range(1, 10)),
+    P.Telemetry(99, (-2**31, 0, 2**31 - 1), (-5, 0, 5), (-400, 0, 400), 0x41, *range(1, 11)),
 ]
 
 

@@ -1,8 +1,8 @@
 /* simdrive: runs the drive firmware (build/drive.elf) in simavr as a simulated Arduino Mega.
  *
  *  - UART0 is bridged to a pseudo-terminal; its slave path is printed first as "PTY <path>".
- *    Bytes from the pty are fed into the simulated UART (which paces them at the
- *    configured baud rate), bytes the firmware sends are written back.
+ *    Bytes from the pty are fed into the simulated UART one per character time at the
+ *    firmware's baud rate; bytes the firmware sends are written back.
  *  - The motor outputs are watched after every instruction. When OCR4A/B/C (PWM duty) or
  *    the direction pins PA0..2 change and then stay unchanged for 200 cycles, a line
  *        PWM <cycle> <duty0> <duty1> <duty2> <dir bits> <rx cycle>
@@ -118,10 +118,20 @@ static void pump_pty(void)
         if (n > 0)
             in_len = (size_t)n;
     }
-    /* feed the simulated UART while receive is enabled and its line FIFO has room;
-     * avr_uart delivers the FIFO bytes one per character time */
-    while (in_pos < in_len && avr_regbit_get(avr, uart0->rxen) && !uart_fifo_isfull(&uart0->input))
+}
+
+/* The line: one byte enters the simulated UART per character time, and only into an empty
+ * receive FIFO. (Keeping many bytes queued in simavr 1.6's UART FIFO stalled its receive
+ * pump for milliseconds at a time, which the firmware rightly saw as inter-byte gaps.) */
+static avr_cycle_count_t next_rx_cycle;
+
+static void feed_line(void)
+{
+    if (in_pos < in_len && avr->cycle >= next_rx_cycle && avr_regbit_get(avr, uart0->rxen)
+        && uart_fifo_isempty(&uart0->input)) {
         avr_raise_irq(uart0->io.irq + UART_IRQ_INPUT, in_buf[in_pos++]);
+        next_rx_cycle = avr->cycle + (uart0->cycles_per_byte ? uart0->cycles_per_byte : 1);
+    }
 }
 
 static void set_encoder_pins(int i)
@@ -287,6 +297,8 @@ int main(int argc, char **argv)
                        (unsigned long long)(avr->cycle - prof_start));
             }
         }
+
+        feed_line();
 
         memcpy(cur, &avr->data[A_OCR4AL], 6);
         cur[6] = avr->data[A_PORTA] & 0x07;

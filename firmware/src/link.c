@@ -17,7 +17,7 @@ static volatile uint16_t rx_last_ms;         /* tick of the last received byte *
 static volatile uint8_t rx_overflow_flag;
 static uint8_t rx_seen;                      /* rx_head at the last link_rx_mark_seen() */
 
-static volatile uint8_t tx_buf[256];        /* 4 telemetry replies; commands wait here only under a request flood */
+static volatile uint8_t tx_buf[256];        /* replies; one that does not fit is dropped, never waited for */
 static volatile uint8_t tx_head, tx_tail;
 
 extern volatile uint16_t g_ms;               /* main.c: 1 kHz tick */
@@ -67,16 +67,19 @@ ISR(USART0_UDRE_vect)
 
 static void tx_put(uint8_t b)
 {
-    uint8_t next = (uint8_t)(tx_head + 1);
-    while (next == tx_tail) {
-        /* ring full: the UDRE interrupt drains it (never called with interrupts off) */
-    }
     tx_buf[tx_head] = b;
-    tx_head = next;
+    tx_head = (uint8_t)(tx_head + 1);
 }
 
-void link_send(uint8_t type, uint8_t seq, const uint8_t *payload, uint8_t len)
+uint8_t link_send(uint8_t type, uint8_t seq, const uint8_t *payload, uint8_t len)
 {
+    /* Never block the control loop on the line: if the host floods requests faster than
+     * their replies can be sent, a reply that does not fit is dropped (the host resends). */
+    uint8_t room = (uint8_t)(tx_tail - tx_head - 1);
+    if (room < (uint16_t)len + PROTO_HEADER_LEN + PROTO_CRC_LEN) {
+        link_stats.tx_dropped++;
+        return 0;
+    }
     uint16_t crc = CRC16_INIT;
     crc = crc16_update(crc, len);
     crc = crc16_update(crc, type);
@@ -92,6 +95,7 @@ void link_send(uint8_t type, uint8_t seq, const uint8_t *payload, uint8_t len)
     tx_put((uint8_t)crc);
     tx_put((uint8_t)(crc >> 8));
     UCSR0B |= _BV(UDRIE0);
+    return 1;
 }
 
 void link_rx_mark_seen(void)

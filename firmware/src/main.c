@@ -92,10 +92,10 @@ static void send_telemetry(uint8_t seq)
         put_u16(p + 22 + 2 * i, (uint16_t)d[i]);
     }
     put_u16(p + 28, (uint16_t)(drive_faults() | latched_faults));
-    const uint16_t counters[9] = {s.rx_frames, s.crc_errors, s.length_errors, s.timeouts,
-                                  s.dropped_bytes, s.naks, s.rx_overflows,
-                                  max_parse_cycles, max_cmd_cycles};
-    for (uint8_t i = 0; i < 9; i++)
+    const uint16_t counters[10] = {s.rx_frames, s.crc_errors, s.length_errors, s.timeouts,
+                                   s.dropped_bytes, s.naks, s.rx_overflows, s.tx_dropped,
+                                   max_parse_cycles, max_cmd_cycles};
+    for (uint8_t i = 0; i < 10; i++)
         put_u16(p + 30 + 2 * i, counters[i]);
     link_send(MSG_TELEMETRY, seq, p, TELEMETRY_LEN);
 }
@@ -200,7 +200,7 @@ int main(void)
         link_rx_mark_seen();              /* bytes arriving from here on keep us awake */
         for (;;) {
             uint16_t t0 = cycles_now();
-            uint8_t got = link_poll(&f, now);
+            uint8_t got = link_poll(&f, ms_now());   /* fresh: a dispatch may have waited */
             uint16_t dt = (uint16_t)(cycles_now() - t0);
             if (dt > max_parse_cycles)
                 max_parse_cycles = dt;

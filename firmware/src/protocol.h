@@ -27,7 +27,7 @@ enum fault_bits {
 #define ACK_SPEED_LIMITED    0x01u
 #define AZIMUTH_LIMIT_MRAD   3142
 
-#define TELEMETRY_LEN        48u
+#define TELEMETRY_LEN        50u
 #define PONG_LEN             13u
 
 typedef struct {

@@ -228,7 +228,7 @@ class Telemetry(Message):
     ``ENCODER_WINDOW_S``, ``duty`` applied signed duty in counts of ``PWM_TOP``; counters wrap at 2**16."""
 
     TYPE: ClassVar[MsgType] = MsgType.TELEMETRY
-    FORMAT: ClassVar[str] = "<I" + "iii" + "hhh" + "hhh" + "H" + "H" * 9
+    FORMAT: ClassVar[str] = "<I" + "iii" + "hhh" + "hhh" + "H" + "H" * 10
     ARITY: ClassVar[dict[str, int]] = {"encoder_counts": 3, "encoder_rate": 3, "duty": 3}
     uptime_ms: int = 0
     encoder_counts: tuple[int, int, int] = (0, 0, 0)
@@ -242,6 +242,7 @@ class Telemetry(Message):
     dropped_bytes: int = 0      # bytes skipped while hunting for a start byte
     naks: int = 0               # NAK replies sent
     rx_overflows: int = 0       # bytes lost because the receive ring buffer was full
+    tx_dropped: int = 0         # replies dropped because the transmit ring was full (request flood)
     max_parse_cycles: int = 0   # worst CPU cycles of one parser call (<= 1 frame, rescans and ISRs incl.)
     max_cmd_cycles: int = 0     # worst CPU cycles to execute one command (IK, PWM update, reply)
 
