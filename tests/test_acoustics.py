@@ -305,3 +305,19 @@ def test_obstacle_rubble_room_listen_runs_with_occlusion():
     assert h_s[sim.N_PRE + 94] == pytest.approx(1 / d_s, rel=0.15)
     n_direct_b = sim.N_PRE + int(round(3.0 / C * FS))
     assert np.max(np.abs(h_b[n_direct_b - 3: n_direct_b + 4])) < 0.1 / 3.0
+
+
+def test_robot_pitch_tilts_the_localized_elevation(localizer):
+    """Nose down by 12 deg (positive pitch): a source level with the array appears 12 deg up in the array frame.
+    (Array raised to 1 m: near the floor the floor reflection, 4 samples behind the direct sound, biases elevation.)"""
+    world = World(room=Room((7.0, 6.0, 3.2)))
+    mount = ArrayMount(height_m=1.0)
+    pose = RobotPose(2.0, 3.0, yaw=0.0, pitch=np.deg2rad(12.0))
+    centre = mount.centre_world(pose)
+    src = SoundSource(tuple(centre + np.array([2.0, 0.0, 0.0])), continuous_voice("female", seed=9), 62.5)
+    sim = AcousticSimulator(world, AcousticConfig(rt60_s=0.4, seed=3), [src])
+    d = localizer.locate(sim.listen_pose(pose, 1.5, mount=mount)).detections[0]
+    assert np.rad2deg(d.elevation) == pytest.approx(12.0, abs=3.0)
+    assert abs(np.rad2deg(d.azimuth)) < 3.0
+    az, el, r = mount.direction_in_array_frame(pose, src.position)
+    assert np.rad2deg(el) == pytest.approx(12.0, abs=1e-6) and r == pytest.approx(2.0)
