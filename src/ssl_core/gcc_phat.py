@@ -79,22 +79,6 @@ class LagSteering:
         return stacked @ self.matrix
 
 
-def gcc_lags(cross: np.ndarray, nfft: int, bins: np.ndarray, upsample: int, max_lag: int) -> np.ndarray:
-    """Cross-correlation at lags ``-max_lag..max_lag`` (in 1/(fs*upsample) steps) from band cross spectra.
-
-    ``cross``: (..., len(bins)) spectra at rfft bins ``bins`` of an ``nfft`` frame.
-    Zero-padding the spectrum to ``nfft*upsample`` interpolates the correlation
-    (band-limited, so exact). The result is normalised so a single perfectly
-    coherent path gives 1 at its lag.
-    """
-    n_up = nfft * upsample
-    full = np.zeros(cross.shape[:-1] + (n_up // 2 + 1,), dtype=cross.dtype)
-    full[..., bins] = cross
-    # irfft's 1/n scaling makes a coherent unit-magnitude band sum to len(bins)*2/n_up at its lag.
-    cc = scipy.fft.irfft(full, n=n_up, axis=-1) * (n_up / (2.0 * len(bins)))
-    return np.concatenate([cc[..., n_up - max_lag:], cc[..., : max_lag + 1]], axis=-1)
-
-
 def gcc_phat(
     x1: np.ndarray,
     x2: np.ndarray,
@@ -102,22 +86,31 @@ def gcc_phat(
     max_tau: float | None = None,
     band_hz: tuple[float, float] | None = None,
     upsample: int = 16,
+    lag_range: tuple[float, float] | None = None,
 ) -> tuple[float, np.ndarray, np.ndarray]:
-    """Whole-signal GCC-PHAT of two 1-D signals.
+    """Whole-signal GCC-PHAT of two 1-D signals (any lengths).
 
     Returns ``(tau, lags, cc)``: the delay estimate ``tau = t_1 - t_2`` (s; positive
-    when ``x1`` lags ``x2``), the lag axis (s) and the correlation.
+    when ``x1`` lags ``x2``), the lag axis (s, steps of ``1 / (fs * upsample)``) and the
+    correlation, normalised so a perfectly coherent delayed copy peaks at 1. The search
+    covers ``lag_range = (lo, hi)`` seconds, or ``+-max_tau``, or every lag.
     """
     x1, x2 = np.asarray(x1, float), np.asarray(x2, float)
     if x1.ndim != 1 or x2.ndim != 1:
         raise ValueError("gcc_phat expects two 1-D signals")
-    n = x1.size + x2.size
-    nfft = int(scipy.fft.next_fast_len(n, real=True))
+    nfft = int(scipy.fft.next_fast_len(x1.size + x2.size, real=True))
+    n_up = nfft * upsample
+    if lag_range is None:
+        half = (n_up // 2 - 1) if max_tau is None else min(n_up // 2 - 1, int(np.ceil(max_tau * fs * upsample)))
+        lo, hi = -half, half
+    else:
+        lo, hi = int(np.floor(lag_range[0] * fs * upsample)), int(np.ceil(lag_range[1] * fs * upsample))
+        if not lo <= hi or hi - lo >= n_up:
+            raise ValueError(f"lag_range {lag_range} s must be ordered and shorter than the signals ({nfft / fs:g} s)")
     bins = band_bins(fs, nfft, band_hz)
     cross = phat_cross_spectra(np.stack([scipy.fft.rfft(x1, nfft), scipy.fft.rfft(x2, nfft)]), np.array([[0, 1]]))[0]
-    max_lag = (nfft * upsample) // 2 - 1
-    if max_tau is not None:
-        max_lag = min(max_lag, int(np.ceil(max_tau * fs * upsample)))
-    cc = gcc_lags(cross[bins], nfft, bins, upsample, max_lag)
-    lags = np.arange(-max_lag, max_lag + 1) / (fs * upsample)
+    full = np.zeros(n_up // 2 + 1, dtype=complex)
+    full[bins] = cross[bins]
+    cc = scipy.fft.irfft(full, n=n_up)[np.arange(lo, hi + 1) % n_up] * (n_up / (2.0 * len(bins)))
+    lags = np.arange(lo, hi + 1) / (fs * upsample)
     return float(lags[np.argmax(cc)]), lags, cc

@@ -35,7 +35,7 @@ from dataclasses import dataclass
 from itertools import combinations
 
 import numpy as np
-import scipy.fft
+from ssl_core.gcc_phat import gcc_phat
 
 from robot.hal import AudioBlock, AudioSource, Clock, WallClock, as_float_audio
 
@@ -133,34 +133,19 @@ def gcc_phat_lag(x: np.ndarray, y: np.ndarray, fs: float, lag_range: tuple[float
                  upsample: int = 1) -> tuple[float, float]:
     """Lag (samples) by which ``y`` trails ``x`` (``y[n] ~ x[n - lag]``), and the PHAT peak height.
 
-    ``x``, ``y``: 1-D, any lengths. Only lags in ``lag_range = (lo, hi)``
-    samples are searched; the peak is refined by band-limited upsampling plus
-    a parabolic fit. The height is 1 for a perfectly coherent delayed copy
-    (PHAT correlation normalised by the number of band bins).
+    ``x``, ``y``: 1-D, any lengths. Only lags in ``lag_range = (lo, hi)`` samples are
+    searched (ssl_core's GCC-PHAT); the peak is refined by a parabolic fit. The height is 1
+    for a perfectly coherent delayed copy.
     """
-    nfft = scipy.fft.next_fast_len(x.size + y.size, real=True)
-    spec = scipy.fft.rfft(np.stack([np.pad(x, (0, max(0, y.size - x.size))),
-                                    np.pad(y, (0, max(0, x.size - y.size)))]), nfft, axis=-1)
-    cross = spec[1] * np.conj(spec[0])
-    f = np.fft.rfftfreq(nfft, 1.0 / fs)
-    keep = f > 0
-    if band_hz is not None:
-        keep &= (f >= band_hz[0]) & (f <= min(band_hz[1], fs / 2))
-    cross = np.where(keep, cross / np.maximum(np.abs(cross), 1e-30), 0.0)
-    n_up = nfft * upsample
-    cc = scipy.fft.irfft(cross, n_up) * (n_up / (2.0 * max(int(keep.sum()), 1)))
-    lo = int(np.floor(lag_range[0] * upsample))
-    hi = int(np.ceil(lag_range[1] * upsample))
-    if hi - lo >= n_up:
-        raise ValueError(f"lag_range {lag_range} is wider than the correlation ({nfft} samples)")
-    win = cc[np.arange(lo, hi + 1) % n_up]
-    i = int(np.argmax(win))
+    _, lags, cc = gcc_phat(y, x, fs, band_hz=band_hz, upsample=upsample,
+                           lag_range=(lag_range[0] / fs, lag_range[1] / fs))
+    i = int(np.argmax(cc))
     frac = 0.0
-    if 0 < i < win.size - 1:
-        a, b, c = win[i - 1], win[i], win[i + 1]
+    if 0 < i < cc.size - 1:
+        a, b, c = cc[i - 1], cc[i], cc[i + 1]
         den = a - 2 * b + c
         frac = 0.5 * (a - c) / den if den < 0 else 0.0
-    return (lo + i + frac) / upsample, float(win[i])
+    return (lags[i] * fs * upsample + frac) / upsample, float(cc[i])
 
 
 def fit_plane_wave_offset(tdoa: np.ndarray, pairs: np.ndarray, positions: np.ndarray, device: np.ndarray,
