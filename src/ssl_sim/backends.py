@@ -21,6 +21,7 @@ own pose (piecewise-constant receiver positions, the usual moving-receiver appro
 """
 from __future__ import annotations
 
+import time
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -58,6 +59,8 @@ class SimAudioSource(AudioSource):
         self._n_mics = robot.mic_positions().shape[0]
         self.blocks_read = 0
         self.moving_blocks = 0
+        #: Wall-clock seconds spent in reads, split into stepping the physics and rendering the audio.
+        self.timing = {"physics": 0.0, "acoustics": 0.0}
 
     @property
     def sample_rate(self) -> int:
@@ -76,10 +79,13 @@ class SimAudioSource(AudioSource):
         n0 = int(round(self.robot.time * fs))
         chunk = max(1, int(round(self.chunk_s * fs)))
         bounds = list(range(0, n, chunk)) + [n]
+        t_start = time.perf_counter()
         mics = [self.robot.mic_positions()]
         for a, b in zip(bounds[:-1], bounds[1:]):
             self._step_to((n0 + b) / fs)
             mics.append(self.robot.mic_positions())
+        t_phys = time.perf_counter()
+        self.timing["physics"] += t_phys - t_start
         traj = np.stack(mics)  # poses at the chunk boundaries (n_chunks + 1, n_mics, 3)
         moved = float(np.max(np.linalg.norm(traj - traj[0], axis=-1)))
         if moved <= self.still_tolerance_m:
@@ -91,6 +97,7 @@ class SimAudioSource(AudioSource):
             used = 0.5 * (traj[:-1] + traj[1:])
             x = np.concatenate([self.acoustics.listen(used[i], (b - a) / fs, (n0 + a) / fs)
                                 for i, (a, b) in enumerate(zip(bounds[:-1], bounds[1:]))], axis=1)
+        self.timing["acoustics"] += time.perf_counter() - t_phys
         self.blocks_read += 1
         block = AudioBlock(x, fs, n0 / fs)
         if self.on_block is not None:

@@ -1,0 +1,454 @@
+"""Run a rescue scenario headlessly: the real ``robot.rescue`` behaviour and ``ssl_core`` localizer on
+the simulated HAL (``ssl_sim.backends``), scored against the ground truth.
+
+    result = run_scenario("paper_lab", seed=0, rerun="save:out/run.rrd")
+    result["n_found"], result["victims"][0]["time_s"], result["path_length_m"]
+
+What is measured (all from the simulator's truth, never from the robot's own estimates):
+
+* **found**: when the behaviour declares a victim (``victim_found`` event), the robot's true base
+  position must be within ``success_radius_m`` (horizontal) of a true victim not found before;
+  the nearest such victim is credited, otherwise the declaration is a false positive. Only finds
+  at or before ``time_limit_s`` count. The run ends when every victim is found, the behaviour
+  finishes (stuck, fault, ``max_victims``) or the time limit passes (at the next step boundary).
+* **path**: length of the true horizontal path of the base; **collisions**: contact episodes of
+  the robot with walls or non-climbable obstacles (rising edges, sampled every control tick).
+* **shortest paths**: geodesic distance on a 5 cm occupancy grid of the free space (obstacles
+  inflated by the bumper radius, 8-connected, Dijkstra with ``scipy.sparse.csgraph``) from where
+  a leg starts to anywhere within ``success_radius_m`` of the victim; straight-line lower bounds
+  are reported too. **SPL** per victim = found x shortest / max(actual, shortest) for the leg
+  that ended at its find (the leg starts at the start or at the previous find); 0 if not found.
+* **listens**: every localization with its detections against the true directions of all
+  sources in the ARRAY frame at the listening pose (each detection is matched to the nearest
+  source that was sounding during the block; errors in degrees).
+* **wall clock**: seconds spent in physics, acoustics, localization and the rest.
+"""
+from __future__ import annotations
+
+import json
+import math
+import time
+from dataclasses import asdict
+from pathlib import Path
+from typing import Any
+
+import numpy as np
+from scipy import sparse
+from scipy.sparse.csgraph import dijkstra
+
+from robot.odometry import wrap_angle
+from robot.rescue import RescueBehaviour, RescueEvent
+from ssl_core.geometry import cube8
+from ssl_core.localizer import Localizer
+from ssl_sim.backends import SimAudioSource, array_frame_directions
+from ssl_sim.physics import SimClock, SimDriveBase, SimRobot
+from ssl_sim.physics.scene_gen import ROBOT_RADIUS, free_space_grid
+from ssl_sim.scenario import Scenario, load_scenario
+from ssl_sim.viz import NullLogger, RunLogger, make_logger
+from ssl_sim.world import World
+from ssl_sim.acoustics import AcousticSimulator
+
+__all__ = ["RescueRun", "run_scenario", "write_results", "FreeSpacePaths"]
+
+
+# ----------------------------------------------------------------------------- shortest paths
+class FreeSpacePaths:
+    """Geodesic distances (m) for the robot centre in ``world``: a ``res`` m grid of the free floor
+    (blocking obstacles and walls grown by ``inflate`` m), 16-connected (king + knight moves: path
+    lengths within ~3 % of the Euclidean geodesic instead of ~8 % with 8 neighbours), Dijkstra."""
+
+    def __init__(self, world: World, inflate: float = ROBOT_RADIUS, res: float = 0.05) -> None:
+        free, centres = free_space_grid(world, inflate=inflate, res=res)
+        self.res = res
+        self.nx, self.ny = free.shape
+        self.free = free
+        self.centres = centres.reshape(-1, 2)
+        idx = np.full(free.shape, -1, dtype=np.int64)
+        idx[free] = np.arange(int(free.sum()))
+        self._idx = idx
+        self._cells = self.centres[free.ravel()]
+        rows, cols, w = [], [], []
+        for di, dj in ((1, 0), (0, 1), (1, 1), (1, -1), (2, 1), (1, 2), (2, -1), (1, -2)):
+            j0, j1 = max(0, -dj), self.ny - max(0, dj)  # columns j with j + dj inside the grid
+            a = idx[0:self.nx - di, j0:j1]
+            b = idx[di:self.nx, j0 + dj:j1 + dj]
+            ok = (a >= 0) & (b >= 0)
+            rows.append(a[ok])
+            cols.append(b[ok])
+            w.append(np.full(int(ok.sum()), res * math.hypot(di, dj)))
+        r, c, ww = np.concatenate(rows), np.concatenate(cols), np.concatenate(w)
+        n = len(self._cells)
+        self.graph = sparse.coo_matrix((ww, (r, c)), shape=(n, n)).tocsr()
+
+    def distance(self, start_xy, goal_xy, radius: float) -> float:
+        """Shortest free path (m) from ``start_xy`` to within ``radius`` of ``goal_xy``; inf if none.
+
+        A start off the free grid (e.g. touching an obstacle) snaps to the nearest free cell,
+        adding that straight distance."""
+        if not len(self._cells):
+            return math.inf
+        s = np.asarray(start_xy, float)[:2]
+        d0 = np.hypot(*(self._cells - s).T)
+        k = int(np.argmin(d0))
+        if math.hypot(*(s - np.asarray(goal_xy, float)[:2])) <= radius:
+            return 0.0
+        dist = dijkstra(self.graph, directed=False, indices=k)
+        dg = np.hypot(*(self._cells - np.asarray(goal_xy, float)[:2]).T)
+        near = dg <= radius
+        if np.any(near):
+            best = float(np.min(dist[near]))
+        else:  # the goal region holds no cell centre: the reachable cell nearest to it, plus the rest
+            reach = np.isfinite(dist)
+            if not np.any(reach):
+                return math.inf
+            j = np.flatnonzero(reach)[int(np.argmin(dg[reach]))]
+            best = float(dist[j] + max(0.0, dg[j] - radius))
+        return best + float(d0[k]) if math.isfinite(best) else math.inf
+
+
+# ----------------------------------------------------------------------------- instrumentation
+class _TracingClock(SimClock):
+    """SimClock that times the physics and calls ``on_tick`` after every sleep."""
+
+    def __init__(self, robot: SimRobot, on_tick) -> None:
+        super().__init__(robot)
+        self.on_tick = on_tick
+        self.physics_s = 0.0
+
+    def sleep(self, seconds: float) -> None:
+        t = time.perf_counter()
+        super().sleep(seconds)
+        self.physics_s += time.perf_counter() - t
+        self.on_tick()
+
+
+class _RecordingLocalizer:
+    """The real Localizer, timed, reporting each result (the behaviour sees the same object API)."""
+
+    def __init__(self, localizer: Localizer, on_result) -> None:
+        self._loc = localizer
+        self.geometry = localizer.geometry
+        self.config = localizer.config
+        self.coarse_grid = localizer.coarse_grid
+        self.on_result = on_result
+        self.seconds = 0.0
+
+    def locate(self, samples):
+        t = time.perf_counter()
+        res = self._loc.locate(samples)
+        self.seconds += time.perf_counter() - t
+        self.on_result(res)
+        return res
+
+
+def _deg(x: float) -> float:
+    return round(math.degrees(x), 2)
+
+
+def _r(x: float, n: int = 3) -> float | None:
+    return None if x is None or not math.isfinite(x) else round(float(x), n)
+
+
+def _unit(az: float, el: float) -> np.ndarray:
+    return np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
+
+
+# ----------------------------------------------------------------------------- the run
+class RescueRun:
+    """One scenario run with ``seed`` (default: the scenario's); ``run()`` returns the results dict."""
+
+    def __init__(self, scenario: Scenario, seed: int | None = None, logger: RunLogger | None = None) -> None:
+        t0 = time.perf_counter()
+        self.scenario = sc = scenario if seed is None else scenario.with_overrides(seed=seed)
+        self.seed = sc.seed
+        self.logger = logger or NullLogger()
+        self.world = world = sc.world()
+        self.sources = sc.sources(world, fs=sc.localizer.fs)
+        self.n_victims = len(world.victims)
+        self.robot = robot = SimRobot(world)
+        acoustics = AcousticSimulator(world, sc.acoustic_config(), sources=self.sources)
+        if acoustics.config.fs != sc.localizer.fs:
+            raise ValueError(f"localizer.fs = {sc.localizer.fs} Hz differs from the simulated audio "
+                             f"({acoustics.config.fs} Hz)")
+        self.audio = SimAudioSource(robot, acoustics, on_block=self._on_block)
+        self.drive = SimDriveBase(robot)
+        self.clock = _TracingClock(robot, self._on_tick)
+        self.localizer = _RecordingLocalizer(Localizer(cube8(), sc.localizer), self._on_result)
+        self.behaviour = RescueBehaviour(self.audio, self.drive, self.clock, self.localizer, sc.behaviour,
+                                         params=robot.params, start_pose=world.robot_start)
+        self.paths = FreeSpacePaths(world)
+        # truth bookkeeping
+        self._obstacle_blocks = [not b.climbable for b in world.obstacles]
+        self.trajectory: list[tuple[float, float, float, float, float]] = []  # t, x, y, z, yaw
+        self.cum_path: list[float] = []
+        self.collisions: list[dict] = []
+        self._in_contact = False
+        self.listens: list[dict] = []
+        self.found: dict[int, dict] = {}
+        self.false_positives: list[dict] = []
+        self.events: list[RescueEvent] = []
+        self._last_block: tuple[int, int] | None = None
+        self._ticks = 0
+        self.setup_s = time.perf_counter() - t0
+        self._record_pose()
+
+    # -- hooks ----------------------------------------------------------------------------
+    def _record_pose(self) -> None:
+        p = self.robot.pose()
+        t = self.robot.time
+        if self.trajectory:
+            _, x0, y0, _, _ = self.trajectory[-1]
+            self.cum_path.append(self.cum_path[-1] + math.hypot(p.x - x0, p.y - y0))
+        else:
+            self.cum_path.append(0.0)
+        self.trajectory.append((t, p.x, p.y, p.z, p.yaw))
+        if self.logger.enabled:
+            self.logger.robot(t, np.array([p.x, p.y, p.z]), p.quat, self.robot.mic_positions(),
+                              self.robot.wheel_odometry().wheel_speeds)
+            self._ticks += 1
+            if self._ticks % 20 == 0:
+                self.logger.trail(t, np.array([row[1:4] for row in self.trajectory[::4]] + [[p.x, p.y, p.z]]))
+
+    def _on_tick(self) -> None:
+        self._record_pose()
+        touching = None
+        for c in self.robot.contacts():
+            if c.obstacle is None or (0 <= c.obstacle < len(self._obstacle_blocks) and self._obstacle_blocks[c.obstacle]):
+                touching = c
+                break
+        if touching is not None and not self._in_contact:
+            self.collisions.append({"time_s": _r(self.robot.time, 2), "position": [_r(v) for v in touching.position],
+                                    "obstacle": touching.obstacle, "geom": touching.world_geom})
+        self._in_contact = touching is not None
+
+    def _on_block(self, block, mics) -> None:
+        self._last_block = (int(round(block.timestamp * block.sample_rate)), block.samples.shape[1])
+        self._record_pose()
+
+    def _on_result(self, res) -> None:
+        t = self.robot.time
+        pose = self.robot.pose()
+        pos = np.array([s.position for s in self.sources]).reshape(-1, 3)
+        az, el, dist = array_frame_directions(self.robot, pos)
+        active = np.ones(len(self.sources))
+        if self._last_block is not None:
+            n0, n = self._last_block
+            for k, s in enumerate(self.sources):
+                x = s.signal.render(n0, n)
+                fr = x[: n // 160 * 160].reshape(-1, 160)
+                active[k] = float(np.mean(np.sqrt(np.mean(fr**2, axis=1)) > 0.05)) if fr.size else 0.0
+        truth = [{"name": s.name, "kind": s.kind, "azimuth_deg": _deg(a), "elevation_deg": _deg(e),
+                  "distance_m": _r(d), "active_fraction": _r(f, 2), "active": bool(f >= 0.1),
+                  "direction": _unit(a, e)} for s, a, e, d, f in zip(self.sources, az, el, dist, active)]
+        candidates = [k for k, s in enumerate(truth) if s["active"]] or list(range(len(truth)))
+        dets = []
+        for d in res.detections:
+            u = np.asarray(d.direction, float)
+            errs = [math.degrees(math.acos(float(np.clip(u @ truth[k]["direction"], -1, 1)))) for k in candidates]
+            j = candidates[int(np.argmin(errs))] if candidates else None
+            row = {**d.to_dict(), "direction": u}
+            if j is not None:
+                row.update({"source": truth[j]["name"], "source_kind": truth[j]["kind"],
+                            "error_deg": round(min(errs), 2),
+                            "azimuth_error_deg": _deg(wrap_angle(d.azimuth - az[j])),
+                            "elevation_error_deg": _deg(d.elevation - el[j])})
+            dets.append(row)
+        rec = {"time_s": _r(t, 3), "pose": [_r(pose.x), _r(pose.y), _r(pose.yaw, 4)],
+               "level_db": _r(res.level_db, 2), "active_frames": int(res.active_frames),
+               "sources": [{k: v for k, v in s.items() if k != "direction"} for s in truth],
+               "detections": [{k: v for k, v in d.items() if k != "direction"} for d in dets]}
+        self.listens.append(rec)
+        if self.logger.enabled:
+            self.logger.listen(t, res.srp_map, self.localizer.coarse_grid.directions, dets, truth)
+            unfound = [i for i in range(self.n_victims) if i not in self.found]
+            near = min((math.hypot(pose.x - self.sources[i].position[0], pose.y - self.sources[i].position[1])
+                        for i in unfound), default=None)
+            self.logger.scalars(t, {"angular_error_deg": dets[0].get("error_deg") if dets else None,
+                                    "distance_to_victim_m": near,
+                                    "srp_peak_power": float(res.detections[0].power) if res.detections else 0.0})
+
+    def _pose_at(self, t: float) -> tuple[float, float, float, float, float]:
+        times = [row[0] for row in self.trajectory]
+        k = max(0, int(np.searchsorted(times, t + 1e-9)) - 1)
+        return self.trajectory[k]
+
+    def _path_at(self, t: float) -> float:
+        times = [row[0] for row in self.trajectory]
+        k = max(0, int(np.searchsorted(times, t + 1e-9)) - 1)
+        return self.cum_path[k]
+
+    def _handle_events(self, events: list[RescueEvent]) -> None:
+        sc = self.scenario
+        for ev in events:
+            self.events.append(ev)
+            if self.logger.enabled:
+                level = "WARN" if ev.decision in ("recover", "stuck", "drive_fault", "error") else "INFO"
+                self.logger.event(ev.time, ev.state.value, str(ev), level)
+                if ev.decision == "target":
+                    _, x, y, z, yaw = self._pose_at(ev.time)
+                    origin, rot = self.robot.array_pose()
+                    self.logger.target(ev.time, origin, rot @ _unit(ev.data["azimuth"], ev.data["elevation"]))
+            if ev.decision != "victim_found":
+                continue
+            _, x, y, _, yaw = self._pose_at(ev.time)
+            est = ev.data.get("position", (math.nan, math.nan))
+            dists = [math.hypot(x - s.position[0], y - s.position[1]) for s in self.sources[: self.n_victims]]
+            cands = [i for i in range(self.n_victims) if i not in self.found and dists[i] <= sc.success_radius_m]
+            entry = {"time_s": _r(ev.time, 2), "criterion": ev.data.get("criterion", ""),
+                     "estimate": [_r(est[0]), _r(est[1])], "robot_position": [_r(x), _r(y)]}
+            if cands and ev.time <= sc.time_limit_s + 1e-9:
+                i = min(cands, key=lambda k: dists[k])
+                v = self.sources[i].position
+                entry.update({"robot_distance_m": _r(dists[i]),
+                              "estimate_error_m": _r(math.hypot(est[0] - v[0], est[1] - v[1]))})
+                self.found[i] = entry
+                if self.logger.enabled:
+                    order = sorted(self.found)
+                    self.logger.found(ev.time, np.array([self.sources[k].position for k in order]),
+                                      [self.sources[k].name for k in order])
+            else:
+                i = int(np.argmin(dists)) if dists else None
+                entry.update({"nearest_victim": self.sources[i].name if i is not None else None,
+                              "nearest_distance_m": _r(dists[i]) if i is not None else None,
+                              "late": ev.time > sc.time_limit_s})
+                self.false_positives.append(entry)
+
+    # -- main loop ------------------------------------------------------------------------
+    def run(self, progress: bool = False) -> dict[str, Any]:
+        sc = self.scenario
+        self.logger.start(self.world, self.sources, self.robot.config,
+                          f"{sc.name} (seed {self.seed}): {sc.description}")
+        bar = None
+        if progress:
+            from tqdm import tqdm
+            bar = tqdm(total=round(sc.time_limit_s), unit="sim s", desc=sc.name, leave=True,
+                       bar_format="{l_bar}{bar}| {n:.0f}/{total_fmt} sim s [{elapsed}<{remaining}{postfix}]")
+            bar.set_postfix_str(f"found 0/{self.n_victims}")
+        t_wall = time.perf_counter()
+        end_reason = "time_up"
+        try:
+            while True:
+                if len(self.found) == self.n_victims:
+                    end_reason = "all_found"
+                    break
+                if self.behaviour.done:
+                    last = self.behaviour.events[-1].decision if self.behaviour.events else "done"
+                    end_reason = f"behaviour_{last}"
+                    break
+                if self.clock.now() >= sc.time_limit_s:
+                    break
+                self._handle_events(self.behaviour.step())
+                if bar is not None:
+                    bar.n = min(self.clock.now(), sc.time_limit_s)
+                    bar.set_postfix_str(f"found {len(self.found)}/{self.n_victims}")
+        finally:
+            self.drive.stop()
+            if bar is not None:
+                bar.close()
+        loop_s = time.perf_counter() - t_wall
+        if self.logger.enabled:
+            self.logger.trail(self.robot.time, np.array([row[1:4] for row in self.trajectory]))
+            self.logger.close()
+        return self._results(end_reason, loop_s)
+
+    def _results(self, end_reason: str, loop_s: float) -> dict[str, Any]:
+        sc = self.scenario
+        victims = []
+        prev_t, prev_xy = 0.0, self.world.robot_start[:2]
+        legs = {}
+        for i in sorted(self.found, key=lambda k: self.found[k]["time_s"]):
+            t = self.found[i]["time_s"]
+            _, x, y, _, _ = self._pose_at(t)
+            legs[i] = (prev_xy, self._path_at(t) - self._path_at(prev_t))
+            prev_t, prev_xy = t, (x, y)
+        start = self.world.robot_start[:2]
+        for i in range(self.n_victims):
+            s = self.sources[i]
+            row = {"name": s.name, "position": list(s.position), "buried": s.buried, "level_db_spl": s.level_db_spl,
+                   "found": i in self.found, "time_s": None,
+                   "shortest_path_from_start_m": _r(self.paths.distance(start, s.position, sc.success_radius_m)),
+                   "straight_line_from_start_m": _r(max(0.0, math.hypot(s.position[0] - start[0],
+                                                                        s.position[1] - start[1])
+                                                        - sc.success_radius_m)),
+                   "spl": 0.0}
+            if i in self.found:
+                leg_start, leg_path = legs[i]
+                shortest = self.paths.distance(leg_start, s.position, sc.success_radius_m)
+                row.update(self.found[i])
+                row.update({"leg_start": [_r(leg_start[0]), _r(leg_start[1])], "leg_path_m": _r(leg_path),
+                            "leg_shortest_path_m": _r(shortest),
+                            "spl": _r(shortest / max(leg_path, shortest, 1e-9), 4) if math.isfinite(shortest) else 0.0})
+            victims.append(row)
+        errs = np.array([d["error_deg"] for rec in self.listens for d in rec["detections"] if "error_deg" in d])
+        first = np.array([rec["detections"][0]["error_deg"] for rec in self.listens
+                          if rec["detections"] and "error_deg" in rec["detections"][0]])
+
+        def stats(a: np.ndarray) -> dict[str, Any]:
+            if not a.size:
+                return {"n": 0, "mean": None, "median": None, "p90": None, "max": None}
+            return {"n": int(a.size), "mean": _r(a.mean(), 2), "median": _r(np.median(a), 2),
+                    "p90": _r(np.percentile(a, 90), 2), "max": _r(a.max(), 2)}
+
+        phys = self.clock.physics_s + self.audio.timing["physics"]
+        acou = self.audio.timing["acoustics"]
+        loc = self.localizer.seconds
+        sim_t = self.robot.time
+        bumps = sum(1 for e in self.events if e.decision == "recover" and e.data.get("bumper"))
+        return {
+            "scenario": sc.name, "scenario_file": sc.path, "seed": self.seed, "scene": self.world.name,
+            "description": sc.description,
+            "n_victims": self.n_victims, "n_found": len(self.found), "success": len(self.found) == self.n_victims,
+            "end_reason": end_reason, "time_limit_s": sc.time_limit_s, "sim_time_s": _r(sim_t, 2),
+            "success_radius_m": sc.success_radius_m,
+            "victims": victims, "false_positives": self.false_positives,
+            "spl": _r(float(np.mean([v["spl"] for v in victims])) if victims else 0.0, 4),
+            "path_length_m": _r(self.cum_path[-1]), "collisions": len(self.collisions),
+            "collision_log": self.collisions, "bumper_recoveries": bumps,
+            "n_listens": len(self.listens),
+            "angular_error_deg": {"all_detections": stats(errs), "strongest_detection": stats(first)},
+            "listens": self.listens,
+            "events": [str(e) for e in self.events],
+            "config": {"behaviour": asdict(sc.behaviour), "localizer": asdict(sc.localizer),
+                       "acoustics": dict(sc.acoustics),
+                       "noise": asdict(sc.noise) if sc.noise is not None else None},
+            "wall_clock_s": {"setup": _r(self.setup_s, 3), "loop": _r(loop_s, 3), "physics": _r(phys, 3),
+                             "acoustics": _r(acou, 3), "localization": _r(loc, 3),
+                             "other": _r(loop_s - phys - acou - loc, 3),
+                             "per_sim_second": _r(loop_s / max(sim_t, 1e-9), 4)},
+        }
+
+
+def _json_default(o):
+    if isinstance(o, np.generic):
+        return o.item()
+    if isinstance(o, np.ndarray):
+        return o.tolist()
+    if isinstance(o, tuple):
+        return list(o)
+    raise TypeError(f"not JSON serialisable: {type(o).__name__}")
+
+
+def write_results(result: dict, out_dir: str | Path, name: str = "results.json") -> Path:
+    out = Path(out_dir)
+    out.mkdir(parents=True, exist_ok=True)
+    p = out / name
+    p.write_text(json.dumps(result, indent=1, default=_json_default))
+    return p
+
+
+def run_scenario(scenario: Scenario | str | Path, seed: int | None = None, *, time_limit_s: float | None = None,
+                 rerun: str | None = None, out_dir: str | Path | None = None, progress: bool = False) -> dict:
+    """Run a scenario (object, shipped name or TOML path) and return its results dict.
+
+    ``rerun``: ``save:PATH`` / ``spawn`` / ``connect[:ADDR]`` (see ``ssl_sim.viz``), None = no logging.
+    ``out_dir``: also write ``results.json`` there."""
+    sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+    sc = sc.with_overrides(seed=seed, time_limit_s=time_limit_s)
+    logger = make_logger(rerun, recording_name=f"{sc.name} seed {sc.seed}")
+    run = RescueRun(sc, logger=logger)
+    result = run.run(progress=progress)
+    if rerun and rerun.startswith("save:"):
+        result["rerun_file"] = rerun[5:]
+    if out_dir is not None:
+        write_results(result, out_dir)
+    return result
