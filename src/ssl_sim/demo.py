@@ -1,65 +1,38 @@
-"""``make demo`` (interim): two talkers in a reverberant lab, localized by ssl_core.
+"""``make demo``: the default rescue scenario, headless, end to end.
 
-Synthesises 2 s of 8-channel audio at the cube8 microphones with
-pyroomacoustics (6 x 5 x 3 m room, RT60 0.4 s, 20 dB SNR), localizes both
-talkers with the streaming SRP-PHAT engine and prints the result beside the
-truth; writes ``out/demo/recording.wav`` and ``out/demo/results.json``.
+The simulated robot (MuJoCo) stands in the paper's empty lab (``scenarios/paper_lab.toml`` on the
+shipped ``empty_lab`` scene); a person lying on the floor 1.5 m away calls for help. The very code
+that would run on the real robot - ``robot.rescue.RescueBehaviour`` with the ``ssl_core`` SRP-PHAT
+localizer - listens through the simulated 8-microphone cube (acoustic simulation at the MuJoCo
+microphone positions), turns, drives and declares the victim found; the runner scores it against
+the simulator's truth. Writes ``out/demo/results.json`` and ``out/demo/rescue.rrd`` (open it with
+``rerun out/demo/rescue.rrd``).
 """
 from __future__ import annotations
 
-import json
 import sys
 from pathlib import Path
 
-import numpy as np
-import pyroomacoustics as pra
-from scipy.io import wavfile
-
-from ssl_core.geometry import cube8
-from ssl_core.grid import angular_distance, direction_from_angles
-from ssl_core.localizer import Localizer, LocalizerConfig
-from ssl_sim.acoustics.voices import continuous_voice
-
-FS = 16000
-TALKERS = [("female", 40.0, 15.0, 1.5), ("male", -100.0, -10.0, 2.0)]  # voice, az deg, el deg, range m
+from ssl_sim.runner import format_summary, run_scenario
+from ssl_sim.scenario import DEFAULT_SCENARIO, load_scenario
 
 
-def main(out_dir: str = "out/demo") -> int:
-    g = cube8()
-    room_dim = np.array([6.0, 5.0, 3.0])
-    e_abs, max_order = pra.inverse_sabine(0.4, room_dim)
-    centre = np.array([2.7, 2.4, 1.3])  # array centre in the room (m)
-    room = pra.ShoeBox(room_dim, fs=FS, materials=pra.Material(e_abs), max_order=min(max_order, 12))
-    n = 2 * FS
-    for k, (voice, az, el, rng_m) in enumerate(TALKERS):
-        u = direction_from_angles(np.deg2rad(az), np.deg2rad(el))
-        room.add_source(centre + rng_m * u, signal=continuous_voice(voice, seed=k, fs=FS, stream=k).render(0, n))
-    room.add_microphone_array((centre + g.positions).T)
-    room.simulate()
-    x = room.mic_array.signals[:, :n]
-    x += np.random.default_rng(0).standard_normal(x.shape) * np.sqrt(np.mean(x**2)) / 10  # 20 dB SNR
-    x = 0.5 * x / np.abs(x).max()
-
-    loc = Localizer(g, LocalizerConfig(n_sources=2, min_power=0.05, rel_threshold=0.2))
-    res = loc.locate(x)
-    print(f"ssl-rescue demo: 2 talkers, {n / FS:.0f} s, room 6x5x3 m, RT60 0.4 s, SNR 20 dB, array {g.name}")
-    print(f"{'talker':>8} {'true az':>8} {'true el':>8} {'found az':>9} {'found el':>9} {'error':>6}")
-    rows = []
-    for voice, az, el, _ in TALKERS:
-        u = direction_from_angles(np.deg2rad(az), np.deg2rad(el))
-        best = min(res.detections, key=lambda d: angular_distance(d.direction, u), default=None)
-        err = float(np.rad2deg(angular_distance(best.direction, u))) if best else float("nan")
-        rows.append({"talker": voice, "true_az_deg": az, "true_el_deg": el,
-                     "found": best.to_dict() if best else None, "error_deg": round(err, 2)})
-        fa = f"{best.azimuth_deg:9.1f} {best.elevation_deg:9.1f}" if best else f"{'-':>9} {'-':>9}"
-        print(f"{voice:>8} {az:8.1f} {el:8.1f} {fa} {err:6.1f}")
+def main(out_dir: str = "out/demo", scenario: str = DEFAULT_SCENARIO, seed: int | None = None) -> int:
     out = Path(out_dir)
-    out.mkdir(parents=True, exist_ok=True)
-    wavfile.write(out / "recording.wav", FS, np.round(x.T * 32767).astype(np.int16))
-    (out / "results.json").write_text(json.dumps({"detections": [d.to_dict() for d in res.detections],
-                                                   "talkers": rows}, indent=2))
-    print(f"wrote {out / 'recording.wav'} and {out / 'results.json'}; try: ssl-locate {out / 'recording.wav'} --sources 2")
-    return 0 if all(r["error_deg"] <= 5 for r in rows) else 1
+    sc = load_scenario(scenario)
+    print(f"ssl-rescue demo: scenario '{sc.name}' - {sc.description}")
+    print("  the rescue behaviour (robot.rescue) + SRP-PHAT localizer (ssl_core) on the simulated HAL "
+          "(MuJoCo robot, simulated acoustics at its microphones)")
+    rrd = out / "rescue.rrd"
+    result = run_scenario(sc, seed=seed, rerun=f"save:{rrd}", out_dir=out, progress=False)
+    print(format_summary(result))
+    print("  what the robot did:")
+    for line in result["events"]:
+        if any(k in line for k in ("target", "turn", "drive", "victim_found", "recover", "explore", "all_found")):
+            print("   " + line)
+    print(f"wrote {out / 'results.json'} and {rrd} (view: rerun {rrd}); "
+          f"more: ssl-rescue run light_rubble_three --rerun spawn")
+    return 0 if result["success"] else 1
 
 
 if __name__ == "__main__":

@@ -155,14 +155,18 @@ def _unit(az: float, el: float) -> np.ndarray:
 
 # ----------------------------------------------------------------------------- the run
 class RescueRun:
-    """One scenario run with ``seed`` (default: the scenario's); ``run()`` returns the results dict."""
+    """One scenario run with ``seed`` (default: the scenario's); ``run()`` returns the results dict.
 
-    def __init__(self, scenario: Scenario, seed: int | None = None, logger: RunLogger | None = None) -> None:
+    ``world``: the run's World if already built (``scenario.world(seed)``; sweeps build it on the
+    client so that workers need no scene files)."""
+
+    def __init__(self, scenario: Scenario, seed: int | None = None, logger: RunLogger | None = None,
+                 world: World | None = None) -> None:
         t0 = time.perf_counter()
         self.scenario = sc = scenario if seed is None else scenario.with_overrides(seed=seed)
         self.seed = sc.seed
         self.logger = logger or NullLogger()
-        self.world = world = sc.world()
+        self.world = world = world if world is not None else sc.world()
         self.sources = sc.sources(world, fs=sc.localizer.fs)
         self.n_victims = len(world.victims)
         self.robot = robot = SimRobot(world)
@@ -452,3 +456,31 @@ def run_scenario(scenario: Scenario | str | Path, seed: int | None = None, *, ti
     if out_dir is not None:
         write_results(result, out_dir)
     return result
+
+
+def format_summary(result: dict) -> str:
+    """A short human-readable account of a run (what the CLI and ``make demo`` print)."""
+    r = result
+    lines = [f"scenario {r['scenario']} (seed {r['seed']}, scene {r['scene']}): "
+             f"found {r['n_found']}/{r['n_victims']} victim(s) in {r['sim_time_s']:.1f} s simulated "
+             f"(limit {r['time_limit_s']:g} s, end: {r['end_reason']})"]
+    for v in r["victims"]:
+        if v["found"]:
+            lines.append(f"  {v['name']:<14} found at {v['time_s']:6.1f} s, robot {v['robot_distance_m']:.2f} m from it, "
+                         f"estimate off by {v['estimate_error_m']:.2f} m; leg {v['leg_path_m']:.2f} m driven vs "
+                         f"{v['leg_shortest_path_m']:.2f} m shortest (SPL {v['spl']:.2f}); {v['criterion']}")
+        else:
+            lines.append(f"  {v['name']:<14} NOT found (shortest path from start {v['shortest_path_from_start_m']} m)")
+    for fp in r["false_positives"]:
+        lines.append(f"  false positive at {fp['time_s']} s: robot {fp['nearest_distance_m']} m from "
+                     f"{fp['nearest_victim']}")
+    a = r["angular_error_deg"]["all_detections"]
+    err = (f"median {a['median']:.1f} deg, mean {a['mean']:.1f} deg, p90 {a['p90']:.1f} deg over {a['n']} detections"
+           if a["n"] else "no detections")
+    lines.append(f"  path {r['path_length_m']:.2f} m, {r['collisions']} collision(s), {r['bumper_recoveries']} bumper "
+                 f"recoveries, {r['n_listens']} listens; direction error {err}; SPL {r['spl']:.2f}")
+    w = r["wall_clock_s"]
+    lines.append(f"  wall clock {w['loop']:.1f} s ({1 / max(w['per_sim_second'], 1e-9):.1f}x real time): physics "
+                 f"{w['physics']:.1f} s, acoustics {w['acoustics']:.1f} s, localization {w['localization']:.1f} s, "
+                 f"other {w['other']:.1f} s")
+    return "\n".join(lines)

@@ -1,0 +1,101 @@
+"""``ssl-rescue``: run rescue scenarios headlessly, watch them in rerun, sweep them over seeds.
+
+    ssl-rescue list
+    ssl-rescue run paper_lab --seed 3 --rerun save:out/run.rrd --out out/run
+    ssl-rescue run scenarios/light_rubble_three.toml --rerun spawn
+    ssl-rescue sweep paper_lab light_rubble_three --seeds 0:20 --out out/sweep
+    ssl-rescue sweep dense_pump --seeds 0:100 --cluster tcp://scheduler:8786
+"""
+from __future__ import annotations
+
+import argparse
+import json
+import logging
+import sys
+from pathlib import Path
+
+from ssl_sim.scenario import ScenarioError, load_scenario, scenario_names
+
+
+def _run(args: argparse.Namespace) -> int:
+    from ssl_sim.runner import format_summary, run_scenario
+
+    sc = load_scenario(args.scenario)
+    out = Path(args.out) if args.out else Path("out") / "runs" / f"{sc.name}_seed{args.seed if args.seed is not None else sc.seed}"
+    result = run_scenario(sc, seed=args.seed, time_limit_s=args.time_limit, rerun=args.rerun, out_dir=out,
+                          progress=not args.quiet)
+    print(format_summary(result))
+    print(f"wrote {out / 'results.json'}" + (f" and {args.rerun[5:]}" if args.rerun and args.rerun.startswith("save:")
+                                             else ""))
+    if args.json:
+        print(json.dumps({k: result[k] for k in ("scenario", "seed", "n_found", "n_victims", "sim_time_s",
+                                                  "path_length_m", "collisions", "spl")}))
+    return 0
+
+
+def _sweep(args: argparse.Namespace) -> int:
+    from ssl_sim.sweep import markdown_table, parse_seeds, run_sweep, summarize, write_tables
+
+    seeds = parse_seeds(args.seeds)
+    rows = run_sweep(args.scenarios, seeds, cluster=args.cluster, workers=args.workers,
+                     time_limit_s=args.time_limit, progress=not args.quiet)
+    tables = summarize(rows)
+    paths = write_tables(rows, tables, args.out)
+    print(markdown_table(tables["scenarios"]))
+    print(markdown_table(tables["victims"]))
+    print("wrote " + ", ".join(str(p) for p in paths.values()))
+    return 0
+
+
+def _list(args: argparse.Namespace) -> int:
+    for name in scenario_names():
+        sc = load_scenario(name)
+        print(f"{name:<22} {sc.description}")
+    return 0
+
+
+def build_parser() -> argparse.ArgumentParser:
+    p = argparse.ArgumentParser(prog="ssl-rescue", description=__doc__.split("\n\n")[0],
+                                formatter_class=argparse.RawDescriptionHelpFormatter)
+    sub = p.add_subparsers(dest="command", required=True)
+
+    r = sub.add_parser("run", help="run one scenario headlessly and write results.json")
+    r.add_argument("scenario", nargs="?", default="paper_lab",
+                   help=f"a shipped scenario ({', '.join(scenario_names())}) or a .toml file (default paper_lab)")
+    r.add_argument("--seed", type=int, default=None, help="run seed (default: the scenario's)")
+    r.add_argument("--time-limit", type=float, default=None, help="simulated seconds (default: the scenario's)")
+    r.add_argument("--rerun", default=None, metavar="save:PATH|spawn|connect[:ADDR]",
+                   help="log to rerun: an .rrd file (headless), a spawned viewer or a running one")
+    r.add_argument("--out", default=None, help="output directory (default out/runs/NAME_seedN)")
+    r.add_argument("--json", action="store_true", help="also print a one-line JSON summary")
+    r.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    r.set_defaults(func=_run)
+
+    s = sub.add_parser("sweep", help="run scenarios x seeds in parallel (local processes or a Dask cluster)")
+    s.add_argument("scenarios", nargs="+", help="shipped scenario names or .toml files")
+    s.add_argument("--seeds", default="0:10", help="START:STOP[:STEP] (stop exclusive), a comma list or one seed")
+    s.add_argument("--cluster", default=None, metavar="tcp://HOST:PORT",
+                   help="Dask scheduler address (needs the 'cluster' extra); default: local processes")
+    s.add_argument("--workers", type=int, default=None, help="local worker processes (default: CPU count)")
+    s.add_argument("--time-limit", type=float, default=None, help="override every scenario's time limit (s)")
+    s.add_argument("--out", default="out/sweep", help="directory for runs.csv, scenarios.csv, victims.csv, summary.md")
+    s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
+    s.set_defaults(func=_sweep)
+
+    ls = sub.add_parser("list", help="list the shipped scenarios")
+    ls.set_defaults(func=_list)
+    return p
+
+
+def main(argv: list[str] | None = None) -> int:
+    args = build_parser().parse_args(argv)
+    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+    try:
+        return args.func(args)
+    except (ScenarioError, ValueError, FileNotFoundError) as exc:
+        print(f"ssl-rescue: error: {exc}", file=sys.stderr)
+        return 2
+
+
+if __name__ == "__main__":
+    sys.exit(main())
