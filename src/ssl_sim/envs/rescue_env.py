@@ -1,0 +1,468 @@
+"""``SSLRescueEnv``: find victims by sound with the simulated robot, as a gymnasium environment.
+
+One step (``EnvConfig``, defaults in brackets): the normalised action ``a`` in [-1, 1]^3 is
+scaled to a body twist ``(a0 * max_speed, a1 * max_speed, a2 * max_turn_rate)`` (robot frame:
++x forward, +y left, CCW positive; [0.3 m/s, 1.2 rad/s]) and sent through
+``robot.kinematics.twist_to_wheels`` (inverse kinematics, direction-keeping saturation) to the
+MuJoCo robot for ``control_s`` [0.5 s]; the robot stops, settles ``settle_s`` [0.1 s] and listens
+``listen_s`` [0.25 s] standing still (``SimAudioSource``: acoustic simulation at the microphone
+positions of the physics model); ``ssl_core``'s SRP-PHAT localizer turns that audio into the
+observation. A step is 0.85 s of simulated time.
+
+Observation (``gymnasium.spaces.Dict``, float32 unless stated; frames: ARRAY frame = robot frame
+axes, azimuth CCW from forward, elevation up from horizontal):
+
+- ``srp_map`` (n_coarse,): SRP-PHAT power on the localizer's coarse grid
+  (``coarse_grid.directions``, array frame; ~10 degree spacing), normalised (1 = fully coherent),
+  in [-1, 1]; all zeros when the window was silent.
+- ``detections`` (K, 5): the K strongest sources, rows ``[cos az, sin az, sin el, power, level]``,
+  ``power`` normalised SRP in [0, 1], ``level`` the beam level mapped from [-100, 0] dB re full
+  scale to [0, 1]; rows past the number of detections are zero.
+- ``detection_mask`` (K,) int8: 1 where the row is a detection.
+- ``odometry`` (3,): wheel-encoder dead reckoning over the step, ``(dx, dy, dyaw)`` in m, m, rad
+  in the robot frame at the start of the step (clipped to +-1 m, +-pi).
+- ``velocity`` (3,): mean body twist from the encoders over the drive phase (m/s, m/s, rad/s),
+  clipped to +-2 m/s, +-8 rad/s.
+- ``bumper`` (1,) int8: 1 if the bumper was pressed at any time in the step.
+- ``audio`` (8, n) (``include_audio``): the listen window, float in [-1, 1) (int16 / 32768).
+
+Reward (``RewardConfig``): shortest-path progress toward the nearest victim not yet found
+(``navigation.GeodesicMap``, 1 per m), +10 per victim found (robot centre within
+``found_radius_m`` [0.75 m] horizontally of the mouth at the end of a step), -0.2 per step with
+the bumper pressed, -0.01 per step, -10 if the robot tips over (tilt > ``tip_limit_deg``).
+Terminated when every victim is found, the robot tips over or the physics fails; truncation
+is left to ``gymnasium.wrappers.TimeLimit`` (``max_episode_steps`` of the registration).
+
+Randomness: every episode draws one ``episode_seed`` from ``self.np_random``; it seeds the
+scene generator (unless ``scene_seed`` is fixed), the acoustic simulation (noise, sensor, tails)
+and the choice of voices, so a seed fixes the whole episode.
+"""
+from __future__ import annotations
+
+import math
+import os
+import warnings
+from collections import OrderedDict
+from dataclasses import dataclass, replace
+from typing import Any
+
+import gymnasium as gym
+import numpy as np
+from gymnasium import spaces
+
+from robot.kinematics import forward_kinematics
+from robot.odometry import Odometry, wrap_angle
+from ssl_core.localizer import Localizer, LocalizerConfig
+from ssl_sim.acoustics import AcousticConfig, AcousticSimulator, AmbientNoise
+from ssl_sim.backends import SimAudioSource
+from ssl_sim.envs.config import FIDELITY_ACOUSTICS, EnvConfig
+from ssl_sim.envs.navigation import GeodesicMap
+from ssl_sim.envs.voices import episode_victims
+from ssl_sim.physics import PhysicsError, SimRobot, generate_world, load_scene
+from ssl_sim.world import World
+
+FS = 16000
+LEVEL_FLOOR_DB = -100.0   # detection level mapped to 0 ...
+LEVEL_CEIL_DB = 0.0       # ... and to 1 (dB re a full-scale sine)
+_CHECK_DT = 0.1           # s: bumper / path sampling interval while driving
+_EPISODE_CACHE_SIZE = 3
+_MAX_SCENE_DRAWS = 30
+
+
+@dataclass
+class _Episode:
+    """What one episode seed builds (cached per process: repeated seeds skip the build)."""
+
+    world: World
+    n_victims: int
+    robot: SimRobot
+    acoustics: AcousticSimulator
+    audio: SimAudioSource
+    geodesic: GeodesicMap
+    found_radius: float
+    shortest_path: float
+
+
+_LOCALIZERS: dict[LocalizerConfig, Localizer] = {}
+
+
+def _localizer(cfg: LocalizerConfig) -> Localizer:
+    """One localizer per configuration and process (``locate`` keeps no state between calls)."""
+    loc = _LOCALIZERS.get(cfg)
+    if loc is None:
+        loc = _LOCALIZERS[cfg] = Localizer("cube8", cfg)
+    return loc
+
+
+def localizer_config(config: EnvConfig) -> LocalizerConfig:
+    """The SRP-PHAT settings behind the observation."""
+    return LocalizerConfig(fs=FS, coarse_resolution_deg=config.coarse_resolution_deg,
+                           resolution_deg=config.resolution_deg, n_sources=config.n_detections,
+                           min_power=config.min_power, rel_threshold=0.3,
+                           min_separation_deg=max(20.0, 2 * config.coarse_resolution_deg))
+
+
+class SSLRescueEnv(gym.Env):
+    """The rescue robot finding victims by sound; see the module docstring.
+
+    ``config``: an :class:`EnvConfig` (default ``EnvConfig()``); keyword ``overrides`` replace
+    its fields, so ``gymnasium.make("SSLRescue-v0", fidelity="full", n_victims=2)`` works.
+    ``render_mode``: None or ``"rgb_array"`` (MuJoCo offscreen camera over the room; on machines
+    without a display set ``MUJOCO_GL=osmesa`` before mujoco is first imported).
+    """
+
+    metadata = {"render_modes": ["rgb_array"], "render_fps": 4}
+
+    def __init__(self, config: EnvConfig | None = None, render_mode: str | None = None, **overrides: Any) -> None:
+        super().__init__()
+        cfg = config if config is not None else EnvConfig()
+        if not isinstance(cfg, EnvConfig):
+            raise ValueError(f"config: expected an EnvConfig, got {type(cfg).__name__}")
+        self.config = cfg = cfg.with_overrides(**overrides) if overrides else cfg
+        if render_mode is not None and render_mode not in self.metadata["render_modes"]:
+            raise ValueError(f"render_mode: expected None or one of {self.metadata['render_modes']}, got {render_mode!r}")
+        self.render_mode = render_mode
+        self.metadata = {**self.metadata, "render_fps": max(1, int(round(1.0 / cfg.step_s)))}
+        self._scenario = None
+        if cfg.scenario is not None:
+            from ssl_sim.scenario import load_scenario
+
+            self._scenario = load_scenario(cfg.scenario)
+        self.localizer = _localizer(localizer_config(cfg))
+        self.coarse_directions = self.localizer.coarse_grid.directions.copy()
+        self.n_listen = int(round(cfg.listen_s * FS))
+        K = cfg.n_detections
+        det_low = np.tile(np.array([-1, -1, -1, 0, 0], np.float32), (K, 1))
+        obs = {
+            "srp_map": spaces.Box(-1.0, 1.0, (self.coarse_directions.shape[0],), np.float32),
+            "detections": spaces.Box(det_low, np.ones((K, 5), np.float32), dtype=np.float32),
+            "detection_mask": spaces.MultiBinary(K),
+            "odometry": spaces.Box(np.array([-1, -1, -np.pi], np.float32), np.array([1, 1, np.pi], np.float32),
+                                   dtype=np.float32),
+            "velocity": spaces.Box(np.array([-2, -2, -8], np.float32), np.array([2, 2, 8], np.float32),
+                                   dtype=np.float32),
+            "bumper": spaces.MultiBinary(1),
+        }
+        if cfg.include_audio:
+            obs["audio"] = spaces.Box(-1.0, 1.0, (8, self.n_listen), np.float32)
+        self.observation_space = spaces.Dict(obs)
+        self.action_space = spaces.Box(-1.0, 1.0, (3,), np.float32)
+        self._twist_scale = np.array([cfg.max_speed, cfg.max_speed, cfg.max_turn_rate])
+        self._cache: OrderedDict[int, _Episode] = OrderedDict()
+        self._ep: _Episode | None = None
+        self._renderer = None
+        self._renderer_model = None
+
+    # ------------------------------------------------------------------ episodes
+    def _build(self, episode_seed: int) -> _Episode:
+        cfg = self.config
+        rng = np.random.default_rng(episode_seed)
+        acoustic_seed = int(rng.integers(2**31))
+        sc = self._scenario
+        with warnings.catch_warnings():
+            # ISM order capped by the obstacle budget: wanted, and reported once by the benchmark.
+            warnings.simplefilter("ignore", UserWarning)
+            if sc is not None:
+                world = sc.world(seed=episode_seed)
+                sources = sc.sources(world, seed=acoustic_seed, fs=FS)
+                ac = sc.acoustic_config(seed=acoustic_seed)
+                order = min(ac.ism_order, FIDELITY_ACOUSTICS[cfg.fidelity]["ism_order"])
+                ac = replace(ac, ism_order=order)
+                found_radius = sc.success_radius_m
+            else:
+                if cfg.scene is not None:
+                    world = load_scene(cfg.scene)
+                    if not world.victims:
+                        raise ValueError(f"EnvConfig.scene={cfg.scene!r}: the scene has no victim sites")
+                else:
+                    world = self._generate(rng, episode_seed)
+                sources = episode_victims(world, rng, cfg.victim_sound, cfg.victim_level_db_spl, FS)
+                ac = AcousticConfig(seed=acoustic_seed, rt60_s=cfg.rt60_s, ambient=AmbientNoise(cfg.noise_db_spl, "hvac"),
+                                    **FIDELITY_ACOUSTICS[cfg.fidelity])
+                found_radius = cfg.found_radius_m
+            robot = SimRobot(world)
+            acoustics = AcousticSimulator(world, ac, sources)
+        audio = SimAudioSource(robot, acoustics, still_tolerance_m=2e-3)
+        geo = GeodesicMap(world, found_radius)
+        start = world.robot_start[:2]
+        return _Episode(world, len(world.victims), robot, acoustics, audio, geo, found_radius,
+                        geo.shortest_tour(start))
+
+    def _generate(self, rng: np.random.Generator, episode_seed: int) -> World:
+        """A generated scene whose victims are all at least ``min_start_distance_m`` (shortest path)
+        from the start; scenes that are not are redrawn with seeds from ``rng``."""
+        cfg = self.config
+        rub = cfg.rubble if cfg.n_victims is None else replace(cfg.rubble, n_victims=cfg.n_victims)
+        if cfg.scene_seed is not None:
+            return generate_world(rub, seed=cfg.scene_seed)
+        seed = episode_seed
+        for _ in range(_MAX_SCENE_DRAWS):
+            world = generate_world(rub, seed=seed)
+            geo = GeodesicMap(world, cfg.found_radius_m)
+            d = [geo.distance(k, world.robot_start[:2]) for k in range(len(world.victims))]
+            if all(math.isfinite(x) and x >= cfg.min_start_distance_m for x in d):
+                return world
+            seed = int(rng.integers(2**31))
+        raise RuntimeError(f"no generated scene with every victim >= min_start_distance_m = "
+                           f"{cfg.min_start_distance_m} m from the start in {_MAX_SCENE_DRAWS} draws; "
+                           "lower it or enlarge rubble.room_size")
+
+    def reset(self, *, seed: int | None = None, options: dict | None = None):
+        super().reset(seed=seed)
+        episode_seed = int(self.np_random.integers(2**31))
+        ep = self._cache.get(episode_seed)
+        if ep is None:
+            ep = self._build(episode_seed)
+            self._cache[episode_seed] = ep
+            if len(self._cache) > _EPISODE_CACHE_SIZE:
+                self._cache.popitem(last=False)
+        else:
+            self._cache.move_to_end(episode_seed)
+        self._ep = ep
+        self.episode_seed = episode_seed
+        ep.robot.reset()
+        self._odo = Odometry(ep.robot.params)
+        self._odo.update(ep.robot.wheel_odometry())
+        self._found = np.zeros(ep.n_victims, bool)
+        self._time_offset = 0.0
+        self._path = 0.0
+        self._steps = 0
+        self._collisions = 0
+        self._xy = self._robot_xy()
+        self._reset_marker_colours()
+        obs, _ = self._listen_and_observe(np.zeros(3), np.zeros(3), False)
+        info = self._info(collided=False)
+        info["shortest_path_m"] = ep.shortest_path
+        return obs, info
+
+    # ------------------------------------------------------------------ stepping
+    def step(self, action):
+        if self._ep is None:
+            raise RuntimeError("SSLRescueEnv.step() called before reset()")
+        a = np.asarray(action, dtype=np.float64)
+        if a.shape != (3,) or not np.all(np.isfinite(a)):
+            raise ValueError(f"action: expected 3 finite numbers in [-1, 1] (vx, vy, omega normalised), got {action!r}")
+        a = np.clip(a, -1.0, 1.0)
+        cfg, ep, robot = self.config, self._ep, self._ep.robot
+        target = self._nearest_unfound()
+        d_before = ep.geodesic.distance(target, self._xy) if target is not None else 0.0
+        pose0 = self._odo.pose
+        collided = False
+        physics_error = None
+        try:
+            robot.set_twist(*(a * self._twist_scale))
+            collided |= self._advance(cfg.control_s)
+            pose_drive = self._odo.update(robot.wheel_odometry())
+            robot.stop()
+            collided |= self._advance(cfg.settle_s)
+            obs, collided_listening = self._listen_and_observe(pose0, pose_drive, collided)
+            collided |= collided_listening
+        except PhysicsError as exc:
+            physics_error = str(exc)
+            obs = self._blank_obs()
+        self._steps += 1
+        self._collisions += int(collided)
+        newly = self._update_found()
+        tilt = math.degrees(robot.pose().tilt)
+        tipped = tilt > cfg.tip_limit_deg or physics_error is not None
+        d_after = ep.geodesic.distance(target, self._xy) if target is not None else 0.0
+        progress = d_before - d_after if math.isfinite(d_before) and math.isfinite(d_after) else 0.0
+        rw = cfg.reward
+        reward = (rw.progress * progress + rw.found * newly - rw.collision * collided - rw.time
+                  - rw.tip_over * tipped)
+        terminated = bool(self._found.all() or tipped)
+        info = self._info(collided)
+        info["reward_terms"] = {"progress": rw.progress * progress, "found": rw.found * newly,
+                                "collision": -rw.collision * collided, "time": -rw.time,
+                                "tip_over": -rw.tip_over * tipped}
+        if tipped:
+            info["tipped_over"] = True
+        if physics_error is not None:
+            info["physics_error"] = physics_error
+        return obs, float(reward), terminated, False, info
+
+    def _advance(self, duration: float) -> bool:
+        """Step the physics ``duration`` s, sampling the bumper and the true path every 0.1 s."""
+        robot = self._ep.robot
+        n = max(1, int(math.ceil(duration / _CHECK_DT - 1e-9))) if duration > 0 else 0
+        hit = False
+        for k in range(n):
+            robot.step(duration / n)
+            hit |= robot.bumper()
+            self._track_path()
+        return hit
+
+    def _track_path(self) -> None:
+        xy = self._robot_xy()
+        self._path += float(np.hypot(*(xy - self._xy)))
+        self._xy = xy
+
+    def _robot_xy(self) -> np.ndarray:
+        p = self._ep.robot.pose()
+        return np.array([p.x, p.y])
+
+    def _listen_and_observe(self, pose0, pose_drive, collided: bool) -> tuple[dict, bool]:
+        ep, cfg = self._ep, self.config
+        samples = self._listen()
+        self._track_path()
+        bump_end = ep.robot.bumper()
+        pose1 = self._odo.update(ep.robot.wheel_odometry())
+        res = self.localizer.locate(samples)
+        K = cfg.n_detections
+        det = np.zeros((K, 5), np.float32)
+        mask = np.zeros(K, np.int8)
+        for i, d in enumerate(res.detections[:K]):
+            lvl = (d.level_db - LEVEL_FLOOR_DB) / (LEVEL_CEIL_DB - LEVEL_FLOOR_DB)
+            det[i] = (math.cos(d.azimuth), math.sin(d.azimuth), math.sin(d.elevation), d.power, lvl)
+            mask[i] = 1
+        np.clip(det, self.observation_space["detections"].low, self.observation_space["detections"].high, out=det)
+        obs = {
+            "srp_map": np.clip(np.asarray(res.srp_map, np.float32), -1.0, 1.0),
+            "detections": det,
+            "detection_mask": mask,
+            "odometry": self._body_delta(pose0, pose1, self.observation_space["odometry"]),
+            "velocity": self._body_delta(pose0, pose_drive, self.observation_space["velocity"], 1.0 / cfg.control_s),
+            "bumper": np.array([collided or bump_end], np.int8),
+        }
+        if cfg.include_audio:
+            x = np.asarray(samples)
+            x = x.astype(np.float32) / 32768.0 if x.dtype == np.int16 else np.clip(x.astype(np.float32), -1, 1)
+            obs["audio"] = x
+        self._last_result = res
+        self._last_audio = samples
+        return obs, bool(bump_end)
+
+    def _listen(self) -> np.ndarray:
+        """The listen window (8, n) int16, standing still. Full fidelity steps the physics through it
+        (``SimAudioSource``); fast fidelity renders the same window at the robot's resting pose
+        without stepping the physics (a stopped, settled robot does not move: measured creep after
+        the settle time is below 0.1 mm) and keeps the skipped time in ``_time_offset``."""
+        ep = self._ep
+        if self.config.fidelity == "full":
+            return ep.audio.read(self.n_listen).samples
+        n0 = int(round(self.sim_time * FS))
+        x = ep.acoustics.listen(ep.robot.mic_positions(), self.n_listen / FS, n0 / FS)
+        self._time_offset += self.n_listen / FS
+        return x
+
+    @property
+    def sim_time(self) -> float:
+        """Simulated time of the episode (s): physics time plus listening not stepped in fast mode."""
+        return self._ep.robot.time + self._time_offset
+
+    @staticmethod
+    def _body_delta(pose0, pose1, space: spaces.Box, scale: float = 1.0) -> np.ndarray:
+        """(dx, dy, dyaw) from ``pose0`` to ``pose1`` (odometry frame) in the body frame of ``pose0``, x ``scale``."""
+        p0, p1 = np.asarray(pose0, float), np.asarray(pose1, float)
+        c, s = math.cos(p0[2]), math.sin(p0[2])
+        dx, dy = p1[0] - p0[0], p1[1] - p0[1]
+        v = np.array([c * dx + s * dy, -s * dx + c * dy, float(wrap_angle(p1[2] - p0[2]))]) * scale
+        return np.clip(v, space.low, space.high).astype(np.float32)
+
+    def _blank_obs(self) -> dict:
+        obs = {k: np.zeros(s.shape, s.dtype) for k, s in self.observation_space.spaces.items()}
+        return obs
+
+    # ------------------------------------------------------------------ task state
+    def _nearest_unfound(self) -> int | None:
+        ep = self._ep
+        best, best_d = None, np.inf
+        for k in np.flatnonzero(~self._found):
+            d = ep.geodesic.distance(int(k), self._xy)
+            if best is None or d < best_d:
+                best, best_d = int(k), d
+        return best
+
+    def _update_found(self) -> int:
+        ep = self._ep
+        newly = 0
+        for k, v in enumerate(ep.world.victims):
+            if not self._found[k] and math.hypot(v.position[0] - self._xy[0], v.position[1] - self._xy[1]) \
+                    <= ep.found_radius:
+                self._found[k] = True
+                newly += 1
+                self._mark_found(k)
+        return newly
+
+    def _info(self, collided: bool) -> dict:
+        ep = self._ep
+        target = self._nearest_unfound()
+        p = ep.robot.pose()
+        return {
+            "time_s": self.sim_time,
+            "victims_found": int(self._found.sum()),
+            "n_victims": ep.n_victims,
+            "distance_to_target_m": ep.geodesic.distance(target, self._xy) if target is not None else 0.0,
+            "collided": bool(collided),
+            "collisions": self._collisions,
+            "path_length_m": self._path,
+            "pose": np.array([p.x, p.y, p.yaw]),
+            "episode_seed": self.episode_seed,
+            "scene": ep.world.name,
+        }
+
+    # ------------------------------------------------------------------ rendering
+    def _reset_marker_colours(self) -> None:
+        m = self._ep.robot.model
+        for k in range(self._ep.n_victims):
+            sid = m.site(f"victim{k}").id
+            m.site_rgba[sid] = (1.0, 0.1, 0.6, 0.8)
+
+    def _mark_found(self, k: int) -> None:
+        m = self._ep.robot.model
+        m.site_rgba[m.site(f"victim{k}").id] = (0.1, 0.9, 0.2, 0.9)
+
+    def render(self):
+        """An RGB image (height, width, 3) uint8 from a camera above the room (``render_mode="rgb_array"``)."""
+        if self.render_mode is None:
+            gym.logger.warn("render() called without a render_mode; use render_mode='rgb_array'")
+            return None
+        if self._ep is None:
+            raise RuntimeError("SSLRescueEnv.render() called before reset()")
+        import mujoco
+
+        robot = self._ep.robot
+        if self._renderer is None or self._renderer_model is not robot.model:
+            self._close_renderer()
+            h, w = self.config.render_size
+            m = robot.model
+            m.vis.global_.offheight = max(m.vis.global_.offheight, h)
+            m.vis.global_.offwidth = max(m.vis.global_.offwidth, w)
+            try:
+                self._renderer = mujoco.Renderer(m, h, w)
+            except Exception as exc:  # no OpenGL context: say how to get one
+                raise RuntimeError(
+                    f"cannot create a MuJoCo renderer ({exc}); on a machine without a display set "
+                    f"MUJOCO_GL=osmesa (or egl) before importing mujoco (now MUJOCO_GL="
+                    f"{os.environ.get('MUJOCO_GL', '<unset>')!r})") from exc
+            self._renderer_model = m
+        Lx, Ly, _ = self._ep.world.room.size
+        cam = mujoco.MjvCamera()
+        cam.lookat[:] = (Lx / 2, Ly / 2, 0.0)
+        cam.distance = 1.25 * max(Lx, Ly)
+        cam.elevation = -65.0
+        cam.azimuth = 90.0
+        robot.pose()  # brings positions up to date after mj_step
+        self._renderer.update_scene(robot.data, cam)
+        return np.array(self._renderer.render(), copy=True)
+
+    def _close_renderer(self) -> None:
+        if self._renderer is not None:
+            self._renderer.close()
+        self._renderer = None
+        self._renderer_model = None
+
+    def close(self) -> None:
+        self._close_renderer()
+        super().close()
+
+    # ------------------------------------------------------------------ introspection
+    @property
+    def world(self) -> World | None:
+        """The current episode's World (None before the first reset)."""
+        return None if self._ep is None else self._ep.world
+
+    @property
+    def victims_found(self) -> np.ndarray:
+        return self._found.copy()
+
