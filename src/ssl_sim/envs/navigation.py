@@ -44,7 +44,6 @@ class GeodesicMap:
         self.world, self.goal_radius, self.res = world, float(goal_radius), float(res)
         free, centres = free_space_grid(world, inflate=inflate, res=res)
         self.free, self.centres = free, centres
-        nx, ny = free.shape
         index = -np.ones(free.shape, np.int64)
         index[free] = np.arange(int(free.sum()))
         rows, cols, w = [], [], []
@@ -90,10 +89,22 @@ class GeodesicMap:
         """Shortest-path distance (m) from world point ``xy`` to victim ``victim``'s goal region
         (0 inside it, inf when it cannot be reached)."""
         v = np.asarray(self.world.victims[victim].position[:2])
-        if np.hypot(float(xy[0]) - v[0], float(xy[1]) - v[1]) <= self.goal_radius:
+        x, y = float(xy[0]), float(xy[1])
+        if np.hypot(x - v[0], y - v[1]) <= self.goal_radius:
             return 0.0
+        f = self.fields[victim]
+        # Bilinear between the four surrounding cell centres when all are free and reachable
+        # (a smooth distance, so a small move gives a small change); else the nearest free cell.
+        fx, fy = x / self.res - 0.5, y / self.res - 0.5
+        i0, j0 = int(np.floor(fx)), int(np.floor(fy))
+        if 0 <= i0 < f.shape[0] - 1 and 0 <= j0 < f.shape[1] - 1:
+            q = f[i0:i0 + 2, j0:j0 + 2]
+            if np.all(np.isfinite(q)):
+                tx, ty = fx - i0, fy - j0
+                return float(max(0.0, (q[0, 0] * (1 - tx) + q[1, 0] * tx) * (1 - ty)
+                                 + (q[0, 1] * (1 - tx) + q[1, 1] * tx) * ty))
         i, j, extra = self._cell(xy)
-        return float(self.fields[victim][i, j] + extra)
+        return float(f[i, j] + extra)
 
     def shortest_tour(self, start_xy, victims: list[int] | None = None) -> float:
         """Length (m) of the shortest path from ``start_xy`` through the goal regions of ``victims``

@@ -407,6 +407,7 @@ class SSLRescueEnv(gym.Env):
         for k in range(self._ep.n_victims):
             sid = m.site(f"victim{k}").id
             m.site_rgba[sid] = (1.0, 0.1, 0.6, 0.8)
+            m.site_size[sid, 0] = 0.1  # visible in the overhead view (a site: no physics)
 
     def _mark_found(self, k: int) -> None:
         m = self._ep.robot.model
