@@ -1,0 +1,219 @@
+"""Scenario files -> runs: the shipped scenarios are solved, results agree with the truth, bad files
+give errors naming the field.
+
+Seeds: paper_lab seed 0 (the default), light_rubble_three seed 0.
+"""
+from __future__ import annotations
+
+import json
+import math
+from pathlib import Path
+
+import numpy as np
+import pytest
+from scipy.io import wavfile
+
+from ssl_sim.acoustics.signals import LoopedSignal
+from ssl_sim.cli import main as cli_main
+from ssl_sim.runner import FreeSpacePaths, RescueRun, run_scenario
+from ssl_sim.scenario import ScenarioError, load_scenario, parse_scenario, scenario_names
+from ssl_sim.world import Box, Room, World
+
+
+@pytest.fixture(scope="module")
+def paper_lab_result():
+    return run_scenario("paper_lab", seed=0)
+
+
+def test_shipped_scenarios_load_and_build():
+    assert {"paper_lab", "light_rubble_three", "dense_pump"} <= set(scenario_names())
+    lab = load_scenario("paper_lab")
+    w = lab.world()
+    assert w.name == "empty_lab" and len(w.victims) == 1
+    # The paper's geometry: the caller 1.5 m from the robot at -4 degrees.
+    dx, dy = np.subtract(w.victims[0].position[:2], w.robot_start[:2])
+    assert math.hypot(dx, dy) == pytest.approx(1.5, abs=0.01)
+    assert math.degrees(math.atan2(dy, dx)) == pytest.approx(-4.0, abs=0.2)
+    three = load_scenario("light_rubble_three")
+    assert len(three.world().victims) == 3 and len(three.sources(three.world())) == 3
+    dense = load_scenario("dense_pump")
+    kinds = [s.kind for s in dense.sources(dense.world())]
+    assert kinds == ["victim", "victim", "interferer"]
+    # The behaviour uses the simulated robot's real array height unless the file says otherwise.
+    assert lab.behaviour.array_height_m == pytest.approx(0.27)
+
+
+def test_default_scenario_finds_its_victim(paper_lab_result):
+    r = paper_lab_result
+    assert r["success"] and r["n_found"] == 1 and r["end_reason"] == "all_found"
+    v = r["victims"][0]
+    assert v["found"] and v["time_s"] <= r["time_limit_s"]
+    # Truth: the robot really is next to the caller, and its own estimate of where she lies is close.
+    assert v["robot_distance_m"] <= r["success_radius_m"]
+    assert v["estimate_error_m"] < 0.3
+    # It drove roughly straight at her: at least the geodesic, not much more than the 1.5 m between them.
+    assert v["leg_shortest_path_m"] <= v["leg_path_m"] < 2.0
+    assert 0.4 < v["spl"] <= 1.0
+    assert r["collisions"] == 0 and not r["false_positives"]
+    # Every listen's detections were scored against the true direction; the lab is easy.
+    assert r["n_listens"] >= 2
+    assert r["angular_error_deg"]["strongest_detection"]["median"] < 5.0
+    first = r["listens"][0]
+    assert first["sources"][0]["azimuth_deg"] == pytest.approx(-4.0, abs=1.0)  # truth in the array frame
+    assert first["detections"][0]["source"] == "caller"
+
+
+def test_runs_are_deterministic_for_a_seed(paper_lab_result):
+    again = run_scenario("paper_lab", seed=0)
+    strip = ("wall_clock_s",)
+    a = {k: v for k, v in paper_lab_result.items() if k not in strip}
+    b = {k: v for k, v in again.items() if k not in strip}
+    assert json.dumps(a, sort_keys=True, default=str) == json.dumps(b, sort_keys=True, default=str)
+
+
+def test_path_length_matches_the_physics_trajectory():
+    sc = load_scenario("paper_lab").with_overrides(time_limit_s=6.0)
+    run = RescueRun(sc, seed=2)
+    r = run.run()
+    traj = np.array(run.trajectory)
+    assert np.all(np.diff(traj[:, 0]) >= -1e-9)  # time-ordered samples
+    seg = np.hypot(np.diff(traj[:, 1]), np.diff(traj[:, 2])).sum()
+    assert r["path_length_m"] == pytest.approx(seg, abs=1e-3)
+    # The robot drove along +x toward the caller (start yaw 0): displacement ~ path.
+    assert traj[-1, 1] - traj[0, 1] > 0.8 * seg > 0.3
+    assert r["sim_time_s"] >= 6.0 and r["end_reason"] == "time_up"
+
+
+def test_three_victims_in_light_rubble_at_least_two_found():
+    r = run_scenario("light_rubble_three", seed=0)
+    found = [v for v in r["victims"] if v["found"]]
+    assert len(found) >= 2, r["events"][-10:]
+    assert all(v["time_s"] <= r["time_limit_s"] for v in found)
+    assert all(v["robot_distance_m"] <= r["success_radius_m"] for v in found)
+    assert all(0 < v["spl"] <= 1 for v in found)
+    assert r["angular_error_deg"]["all_detections"]["median"] < 10.0
+    costs = r["wall_clock_s"]
+    assert costs["physics"] > 0 and costs["acoustics"] > 0 and costs["localization"] > 0
+
+
+def test_grid_geodesic_goes_around_a_wall():
+    # A 0.4 m thick wall from y=0 to y=3 in a 6 x 4 m room; the robot (16 cm bumper) must pass its end.
+    w = World(room=Room(size=(6.0, 4.0, 3.0)), obstacles=(Box((3.0, 1.5, 0.5), (0.4, 3.0, 1.0)),),
+              robot_start=(1.0, 1.0, 0.0))
+    p = FreeSpacePaths(w)
+    r = 0.16  # inflation = bumper radius
+    c1, c2 = np.array([2.8 - r, 3.0 + r]), np.array([3.2 + r, 3.0 + r])
+    exact = np.linalg.norm(c1 - [1, 1]) + np.linalg.norm(c2 - c1) + np.linalg.norm([5, 1] - c2) - 0.1
+    d = p.distance((1.0, 1.0), (5.0, 1.0), 0.1)
+    assert exact <= d <= 1.03 * exact
+    free_room = World(room=Room(size=(6.0, 4.0, 3.0)), robot_start=(1.0, 1.0, 0.0))
+    assert FreeSpacePaths(free_room).distance((1, 1), (5, 3), 0.5) == pytest.approx(math.hypot(4, 2) - 0.5, rel=0.03)
+
+
+def test_cli_run_writes_results(tmp_path, capsys):
+    out = tmp_path / "run"
+    assert cli_main(["run", "paper_lab", "--seed", "1", "--time-limit", "4", "--out", str(out), "--quiet"]) == 0
+    data = json.loads((out / "results.json").read_text())
+    assert data["scenario"] == "paper_lab" and data["seed"] == 1 and data["time_limit_s"] == 4.0
+    assert "found 0/1" in capsys.readouterr().out
+
+
+# ---------------------------------------------------------------------------- bad files
+def _write(tmp_path: Path, text: str, name: str = "s.toml") -> Path:
+    p = tmp_path / name
+    p.write_text(text)
+    return p
+
+
+GOOD = """
+name = "t"
+time_limit_s = 30.0
+[scene]
+name = "light_rubble"
+[[victims]]
+position = [3.9, 2.2, 0.1]
+"""
+
+
+def test_a_minimal_file_loads(tmp_path):
+    sc = load_scenario(_write(tmp_path, GOOD))
+    assert sc.name == "t" and sc.time_limit_s == 30.0 and len(sc.world().victims) == 1
+
+
+@pytest.mark.parametrize("text, field", [
+    ("colour = 'red'\n" + GOOD, "unknown key(s) ['colour'] at the top level"),
+    (GOOD + "[robot]\nspeed = 3\n", "robot: unknown key(s) ['speed']"),
+    (GOOD.replace("position = [3.9, 2.2, 0.1]", "position = [3.9, 2.2, 0.1]\nvolume = 3"),
+     "victims[0]: unknown key(s) ['volume']"),
+    (GOOD + "[behaviour]\nlisten_secs = 1.0\n", "behaviour: unknown key(s) ['listen_secs']"),
+    (GOOD + "[localizer]\nn_sources = 'three'\n", "localizer.n_sources: expected an integer"),
+    (GOOD + "[behaviour]\nlisten_s = -1.0\n", "RescueConfig.listen_s"),
+    (GOOD.replace("time_limit_s = 30.0", "time_limit_s = 'long'"), "time_limit_s: expected a number"),
+    (GOOD.replace("[3.9, 2.2, 0.1]", "[3.9, 2.2]"), "victims[0].position: expected a list of 3 numbers"),
+    # (3.0, 2.87) is the pillar of light_rubble
+    (GOOD.replace("[3.9, 2.2, 0.1]", "[2.9967, 2.8673, 0.5]"), "victims[0].position: [2.9967, 2.8673, 0.5] is inside "
+                                                              "obstacle 0 (pillar"),
+    (GOOD.replace("[3.9, 2.2, 0.1]", "[9.0, 2.2, 0.1]"), "victims[0].position: [9.0, 2.2, 0.1] is outside the room"),
+    (GOOD.replace("[3.9, 2.2, 0.1]", "[3.9, 2.2, 0.1]\nsound = 'file'\nfile = 'nope.wav'"),
+     "victims[0].file: voice file not found"),
+    (GOOD.replace("[3.9, 2.2, 0.1]", "[3.9, 2.2, 0.1]\nspeaker = 'robot'"), "victims[0].speaker: expected one of"),
+    (GOOD.replace('name = "light_rubble"', 'name = "moon_base"'), "scene.name: unknown scene 'moon_base'"),
+    (GOOD.replace('name = "light_rubble"', 'generate = "light_rubble"\nname = "light_rubble"'),
+     "scene: expected exactly one of"),
+    (GOOD + "[[interferers]]\nkind = 'jackhammer'\nposition = [1, 1, 0.3]\n", "interferers[0].kind: expected one of"),
+    (GOOD + "[robot]\nstart = [2.9967, 2.8673, 0.0]\n", "robot.start: (2.9967, 2.8673) overlaps obstacle 0"),
+    ("name = 't'\n[[victims]]\nposition = [1, 1, 0.1]\n", "scene: missing [scene] table"),
+    (GOOD + "[acoustics]\nism_order = 40\n", "acoustics: AcousticConfig.ism_order"),
+])
+def test_bad_files_name_the_field(tmp_path, text, field):
+    with pytest.raises(ScenarioError) as exc:
+        load_scenario(_write(tmp_path, text))
+    msg = str(exc.value)
+    assert msg.startswith("s.toml: ") and field in msg, msg
+
+
+def test_unreachable_victim_is_rejected(tmp_path):
+    # Enclose a victim in four walls: in air, but the robot cannot get there.
+    walls = "".join(f"""
+[[obstacles]]
+center = {c}
+size = {s}
+kind = "wall"
+""" for c, s in (([2.0, 1.4, 0.5], [1.4, 0.1, 1.0]), ([2.0, 2.6, 0.5], [1.4, 0.1, 1.0]),
+                   ([1.4, 2.0, 0.5], [0.1, 1.4, 1.0]), ([2.6, 2.0, 0.5], [0.1, 1.4, 1.0])))
+    _write(tmp_path, f'name = "boxed"\nrobot_start = [4.0, 2.0, 0.0]\n[room]\nsize = [5.0, 4.0, 2.5]\n{walls}',
+           "boxed_scene.toml")
+    text = '[scene]\nfile = "boxed_scene.toml"\n[[victims]]\nposition = [2.0, 2.0, 0.1]\n'
+    with pytest.raises(ScenarioError, match=r"victims\[0\].position: .* cannot be reached"):
+        load_scenario(_write(tmp_path, text))
+
+
+def test_voice_file_and_generated_scene(tmp_path):
+    fs = 8000
+    t = np.arange(fs) / fs
+    wavfile.write(tmp_path / "call.wav", fs, (0.3 * np.sin(2 * np.pi * 300 * t) * 32767).astype(np.int16))
+    text = """
+name = "gen"
+[scene]
+generate = "light_rubble"
+[[victims]]
+scene_victim = 0
+sound = "file"
+file = "call.wav"
+level_db_spl = 70.0
+"""
+    sc = load_scenario(_write(tmp_path, text))
+    w3, w4 = sc.world(3), sc.world(4)
+    assert w3.victims != w4.victims  # the run seed draws the generated scene
+    src = sc.sources(w3, fs=16000)
+    assert isinstance(src[0].signal, LoopedSignal) and src[0].level_db_spl == 70.0
+    x = src[0].signal.render(0, 16000)  # resampled to 16 kHz: still a 300 Hz tone, unit RMS
+    f = np.fft.rfftfreq(x.size, 1 / 16000)[np.argmax(np.abs(np.fft.rfft(x)))]
+    assert f == pytest.approx(300.0, abs=2.0) and np.sqrt(np.mean(x**2)) == pytest.approx(1.0, rel=0.05)
+
+
+def test_parse_errors_without_a_file():
+    with pytest.raises(ScenarioError, match="victims: no victims"):
+        parse_scenario({"scene": {"name": "empty_lab", "use_scene_victims": False}})
+    with pytest.raises(ScenarioError, match=r"seed: expected an integer >= 0"):
+        load_scenario("paper_lab").with_overrides(seed=-1)
