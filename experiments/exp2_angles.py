@@ -69,12 +69,18 @@ def run(quick: bool = False, out_dir: Path = RESULTS, seed0: int = 0) -> Outcome
     fig, axs = plt.subplots(2, 2, figsize=(13, 8))
     labels = [f"({a},{e})" for (a, e), _ in TABLE1]
     for ax, key, idx, name in ((axs[0, 0], "az_err", 0, "azimuth"), (axs[0, 1], "el_err", 1, "elevation")):
-        data = [[r[key] for r in sel("table1", a, e)] for (a, e), _ in TABLE1]
-        ax.boxplot(data, tick_labels=labels)
-        paper = [float(np.asarray(m)[idx] - np.asarray(t)[idx]) for t, m in TABLE1]
+        # Azimuth is undefined straight above/below the array: no azimuth box for the el = +-90 rows.
+        rows_used = [i for i, ((a, e), _) in enumerate(TABLE1) if idx == 1 or abs(e) < 89]
+        data = [[r[key] for r in sel("table1", *TABLE1[i][0])] for i in rows_used]
+        ax.boxplot(data, positions=[i + 1 for i in rows_used])
+        ax.set_xticks(range(1, len(TABLE1) + 1), labels)
+        paper = [float(np.asarray(TABLE1[i][1])[idx] - np.asarray(TABLE1[i][0])[idx]) for i in rows_used]
         if idx == 0:
             paper = [float((p + 180) % 360 - 180) for p in paper]
-        ax.plot(range(1, len(TABLE1) + 1), paper, "rx", ms=10, mew=2, label="paper (measured - true)")
+            for i, ((a, e), _) in enumerate(TABLE1):
+                if i not in rows_used:
+                    ax.text(i + 1, 0, "azimuth\nundefined\nat el = %+d" % e, ha="center", va="center", fontsize=8)
+        ax.plot([i + 1 for i in rows_used], paper, "rx", ms=10, mew=2, label="paper (measured - true)")
         ax.axhline(0, color="k", lw=0.8)
         ax.set_title(f"Table 1 points: {name} error ({trials} trials each)")
         ax.set_xlabel("true (azimuth, elevation) deg")

@@ -27,10 +27,16 @@ LAB = Lab(array_height_m=1.5, noise_spectrum="hvac")
 FOUND_DEG = 10.0
 
 
-def random_truths(rng: np.random.Generator, n: int, min_sep_deg: float = 30.0) -> list[Truth]:
+def random_truths(rng: np.random.Generator, n: int, min_sep_deg: float = 30.0, lab: Lab = LAB,
+                  clearance_m: float = 0.25) -> list[Truth]:
+    """``n`` random source placements at least ``min_sep_deg`` apart, each ``clearance_m`` inside the room."""
     out: list[Truth] = []
+    size = np.asarray(lab.room_size)
     while len(out) < n:
         t = Truth(float(rng.uniform(-180, 180)), float(rng.uniform(-30, 60)), float(rng.uniform(1.2, 2.5)))
+        p = lab.centre + t.distance_m * t.direction
+        if not np.all((p > clearance_m) & (p < size - clearance_m)):
+            continue
         if all(np.rad2deg(np.arccos(np.clip(t.direction @ u.direction, -1, 1))) >= min_sep_deg for u in out):
             out.append(t)
     return out
@@ -46,23 +52,47 @@ def received_level_db(lab: Lab, truths: list[Truth], seed: int, rt60_s: float) -
     return float(10 * np.log10(np.mean(e[active]) / (20e-6) ** 2))
 
 
+_WINDOW_LOC: list = []
+WINDOW_NOTE = ("the robot's per-window view: ssl_core's default LocalizerConfig (128 ms windows, 1.5 deg grid, "
+               "detection thresholds on), strongest detection per window")
+
+
+def window_errors(x: np.ndarray, truth: Truth) -> tuple[float, float]:
+    """Median angular error (deg) of the per-window detections and the fraction of windows localized within FOUND_DEG."""
+    from ssl_core.localizer import Localizer
+
+    if not _WINDOW_LOC:
+        _WINDOW_LOC.append(Localizer("cube8"))
+    res = _WINDOW_LOC[0].process_all(x)
+    errs = [np.rad2deg(np.arccos(np.clip(r.detections[0].direction @ truth.direction, -1, 1)))
+            for r in res if r.detections]
+    if not res:
+        return np.nan, 0.0
+    return (float(np.median(errs)) if errs else np.nan), float(np.sum(np.asarray(errs) < FOUND_DEG) / len(res))
+
+
 def trial(truths: list[Truth], seed: int, rt60_s: float, noise_db: float | None = None, lab: Lab = LAB,
-          pooled: bool = False) -> list[dict]:
-    """Errors of one trial: the summed-map estimate, and with ``pooled`` also the pooled per-window one."""
+          pooled: bool = False, windows: bool = False) -> list[dict]:
+    """Errors of one trial: the summed-map estimate; with ``pooled`` the pooled per-window one (one row per
+    talker); with ``windows`` the per-window view (one row: median window error, fraction of windows found)."""
     x = record(lab, truths, seed, noise_db_spl=noise_db, rt60_s=rt60_s)
     methods = [("map", localizer(len(truths)).locate(x).detections)]
     if pooled:
         methods.append(("pooled", pooled_localize(x, len(truths))))
-    return [{"method": m, "ang_err": e, "found": bool(e < FOUND_DEG)}
+    rows = [{"method": m, "ang_err": e, "found": float(e < FOUND_DEG)}
             for m, dets in methods for _, _, e in match(dets, truths)]
+    if windows:
+        e, f = window_errors(x, truths[0])
+        rows.append({"method": "window", "ang_err": e, "found": f})
+    return rows
 
 
-def _stats(errs: list[float]) -> dict:
-    e = np.asarray(errs, float)
+def _stats(rows: list[dict]) -> dict:
+    e = np.asarray([r["ang_err"] for r in rows], float)
     fin = e[np.isfinite(e)]
     return {"median": float(np.median(fin)) if fin.size else np.nan, "mean": float(np.mean(fin)) if fin.size else np.nan,
             "p90": float(np.percentile(fin, 90)) if fin.size else np.nan,
-            "found": float(np.mean(e < FOUND_DEG)), "n": int(e.size)}
+            "found": float(np.mean([r["found"] for r in rows])) if rows else np.nan, "n": int(e.size)}
 
 
 def run(quick: bool = False, out_dir: Path = RESULTS, seed0: int = 0) -> Outcome:
@@ -76,7 +106,7 @@ def run(quick: bool = False, out_dir: Path = RESULTS, seed0: int = 0) -> Outcome
             for k in range(trials):
                 seed = seed0 + 7919 * k + 11
                 t = random_truths(np.random.default_rng(seed), 1)
-                for r in trial(t, seed, rt):
+                for r in trial(t, seed, rt, windows=True):
                     rows.append({"sweep": "rt60", "value": rt, "trial": k, "seed": seed, **r})
         snr_lab = Lab(array_height_m=LAB.array_height_m, noise_spectrum="pink")
         for k in range(trials):
@@ -84,7 +114,7 @@ def run(quick: bool = False, out_dir: Path = RESULTS, seed0: int = 0) -> Outcome
             t = random_truths(np.random.default_rng(seed), 1)
             sig_db = received_level_db(snr_lab, t, seed, snr_lab.rt60_s)
             for snr in snrs:
-                for r in trial(t, seed, snr_lab.rt60_s, noise_db=sig_db - snr, lab=snr_lab):
+                for r in trial(t, seed, snr_lab.rt60_s, noise_db=sig_db - snr, lab=snr_lab, windows=True):
                     rows.append({"sweep": "snr", "value": snr, "trial": k, "seed": seed, **r})
         for n in counts:
             for k in range(trials):
@@ -97,58 +127,54 @@ def run(quick: bool = False, out_dir: Path = RESULTS, seed0: int = 0) -> Outcome
 
     import matplotlib.pyplot as plt
 
-    fig, axs = plt.subplots(1, 3, figsize=(16, 4.5))
-    summary = {}
-    def errs(sweep, v, method="map"):
-        return [r["ang_err"] for r in rows if r["sweep"] == sweep and r["value"] == float(v) and r["method"] == method]
+    def sel(sweep, v, method):
+        return [r for r in rows if r["sweep"] == sweep and r["value"] == float(v) and r["method"] == method]
 
-    for ax, sweep, xs, xlabel in ((axs[0], "rt60", rt60s, "RT60 (s)"), (axs[1], "snr", snrs, "SNR at the array (dB)"),
-                                  (axs[2], "talkers", counts, "simultaneous talkers")):
-        st = [_stats(errs(sweep, v)) for v in xs]
-        summary[sweep] = {str(v): s for v, s in zip(xs, st)}
+    colours = {"map": "tab:blue", "window": "tab:green", "pooled": "tab:orange"}
+    sweeps = (("rt60", rt60s, "RT60 (s)", ("map", "window")), ("snr", snrs, "SNR at the array (dB)", ("map", "window")),
+              ("talkers", counts, "simultaneous talkers", ("map", "pooled")))
+    summary: dict = {}
+    fig, axs = plt.subplots(1, 3, figsize=(17, 4.8))
+    for ax, (sweep, xs, xlabel, methods) in zip(axs, sweeps):
         pos = np.arange(1, len(xs) + 1, dtype=float)
-        methods = ("map", "pooled") if sweep == "talkers" else ("map",)
+        ax2 = ax.twinx()
         for mi, method in enumerate(methods):
-            off = (mi - (len(methods) - 1) / 2) * 0.3
-            data = [np.clip(errs(sweep, v, method), 0, 180) for v in xs]
-            bp = ax.boxplot(data, positions=pos + off, widths=0.25 if len(methods) > 1 else 0.5, showfliers=True,
-                            patch_artist=True)
+            st = {str(v): _stats(sel(sweep, v, method)) for v in xs}
+            summary[f"{sweep}_{method}"] = st
+            if method == "map":
+                summary[sweep] = st
+            off = (mi - 0.5) * 0.32
+            data = [np.clip([r["ang_err"] for r in sel(sweep, v, method) if np.isfinite(r["ang_err"])], 0.05, 180)
+                    for v in xs]
+            bp = ax.boxplot(data, positions=pos + off, widths=0.28, patch_artist=True, showfliers=True,
+                            flierprops={"markersize": 3})
             for b in bp["boxes"]:
-                b.set_facecolor("tab:blue" if method == "map" else "tab:orange")
-                b.set_alpha(0.5)
-            found = [100 * _stats(errs(sweep, v, method))["found"] for v in xs]
-            if sweep == "talkers":
-                summary.setdefault("talkers_" + method, {}).update(
-                    {str(v): _stats(errs(sweep, v, method)) for v in xs})
-            ax2 = ax.twinx() if mi == 0 else ax2
-            ax2.plot(pos + off, found, ".-", color="red" if method == "map" else "darkred",
-                     label=f"{method}: found" if sweep == "talkers" else None)
+                b.set_facecolor(colours[method])
+                b.set_alpha(0.55)
+            ax2.plot(pos + off, [100 * st[str(v)]["found"] for v in xs], "--", marker=".", lw=1,
+                     color=colours[method], label=f"{method}: % found")
         ax.set_xticks(pos, [f"{v:g}" for v in xs])
-        ax.set_yscale("symlog", linthresh=2.0)
-        ax.set_ylabel("angular error (deg)")
+        ax.set_yscale("log")
+        ax.set_ylim(0.05, 200)
+        ax.set_ylabel("angular error (deg), boxes")
         ax.set_xlabel(xlabel)
         ax2.set_ylim(0, 105)
-        ax2.set_ylabel(f"found within {FOUND_DEG:g} deg (%)", color="r")
-        if sweep == "talkers":
-            ax2.legend(loc="center right", fontsize=8)
+        ax2.set_ylabel(f"found within {FOUND_DEG:g} deg (%), dashed")
+        ax2.legend(loc="lower right", fontsize=8)
         ax.grid(alpha=0.3)
-    axs[0].set_title(f"Error vs reverberation ({LAB.noise_db_spl:g} dB SPL noise)")
-    axs[1].set_title(f"Error vs SNR (RT60 {LAB.rt60_s:g} s, pink diffuse noise)")
-    axs[2].set_title(f"Error vs talkers (blue: summed map, orange: pooled windows)")
+    axs[0].set_title(f"Reverberation ({LAB.noise_db_spl:g} dB SPL noise)")
+    axs[1].set_title(f"SNR (RT60 {LAB.rt60_s:g} s, pink diffuse noise)")
+    axs[2].set_title(f"Simultaneous talkers (RT60 {LAB.rt60_s:g} s)")
     fig.tight_layout()
     fig.savefig(out_dir / "exp4_conditions.png", dpi=110)
     plt.close(fig)
 
     sections = []
-    for sweep, xs, name in (("rt60", rt60s, "RT60 (s)"), ("snr", snrs, "SNR (dB)")):
-        sections.append(md_table([name, "median err (deg)", "mean err", "90th pct", f"found < {FOUND_DEG:g} deg", "n"],
-                                 [[v, s["median"], s["mean"], s["p90"], f"{100 * s['found']:.0f}%", s["n"]]
-                                  for v, s in ((v, summary[sweep][str(v)]) for v in xs)]))
-    sections.append(md_table(["talkers", "method", "median err (deg)", "mean err", "90th pct", f"found < {FOUND_DEG:g} deg",
-                              "n"],
-                             [[v, m, s["median"], s["mean"], s["p90"], f"{100 * s['found']:.0f}%", s["n"]]
-                              for v in counts for m in ("map", "pooled")
-                              for s in (summary["talkers_" + m][str(v)],)]))
+    for sweep, xs, name, methods in sweeps:
+        sections.append(md_table([name, "method", "median err (deg)", "mean err", "90th pct", f"found < {FOUND_DEG:g} deg",
+                                  "n"],
+                                 [[v, m, s["median"], s["mean"], s["p90"], f"{100 * s['found']:.0f}%", s["n"]]
+                                  for v in xs for m in methods for s in (summary[f"{sweep}_{m}"][str(v)],)]))
     md = f"""### 4. Beyond the paper: reverberation, noise, number of talkers
 
 Set-up: {LAB.describe()} (RT60 and noise changed per sweep as stated). Random directions per trial (azimuth uniform,
@@ -157,6 +183,10 @@ angles; "found" = matched within {FOUND_DEG:g} deg. SNR = broadband level of the
 reverberant, while sounding) over the diffuse noise level at the array.
 
 ![conditions](exp4_conditions.png)
+
+"map": one estimate per trial from the SRP map summed over the whole recording (as in the paper); "window":
+{WINDOW_NOTE} - its error is the median over a trial's windows and "found" the share of its windows within
+{FOUND_DEG:g} deg (pauses between calls count as misses).
 
 Reverberation time:
 
