@@ -233,7 +233,10 @@ class RescueRun:
         t = self.robot.time
         pose = self.robot.pose()
         pos = np.array([s.position for s in self.sources]).reshape(-1, 3)
-        az, el, dist = array_frame_directions(self.robot, pos)
+        # Truth at the middle of the block just heard (a parked robot creeps slightly).
+        poses = self.audio.last_array_poses
+        origin, rot = poses[len(poses) // 2] if poses else self.robot.array_pose()
+        az, el, dist = array_frame_directions(origin, rot, pos)
         active = np.ones(len(self.sources))
         if self._last_block is not None:
             n0, n = self._last_block
