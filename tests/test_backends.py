@@ -76,3 +76,16 @@ def test_moving_robot_is_rendered_per_chunk_and_standing_robot_in_one_go():
     assert seen[-1][0] == 10  # 0.5 s in 50 ms chunks
     # The robot drove while listening: about 0.2 m/s along its heading.
     assert hal.robot.pose().x - x0 > 0.05
+
+
+def test_scenario_builds_a_hal_the_behaviour_can_use():
+    from ssl_sim.scenario import load_scenario
+
+    sc = load_scenario("paper_lab")
+    hal = sc.hal(seed=4)
+    assert hal.robot.time == 0.0 and hal.audio.n_channels == 8
+    p = hal.robot.pose()
+    assert (p.x, p.y) == pytest.approx(sc.world().robot_start[:2], abs=1e-3)
+    assert [s.name for s in hal.acoustics.sources] == ["caller"]
+    block = hal.audio.read(FS // 2)
+    assert block.sample_rate == FS and hal.clock.now() == pytest.approx(0.5, abs=hal.robot.timestep)

@@ -237,6 +237,16 @@ class Scenario:
         seed = self.seed if seed is None else seed
         return AcousticConfig(seed=seed, ambient=self.noise, **self.acoustics)
 
+    def hal(self, seed: int | None = None, world: World | None = None):
+        """The simulated robot's HAL for a run with ``seed``: ``ssl_sim.backends.SimHal`` (robot,
+        acoustics, audio, drive, clock) in ``world`` (default ``self.world(seed)``), robot at the start."""
+        from ssl_sim.backends import make_sim_hal
+
+        seed = self.seed if seed is None else seed
+        world = world if world is not None else self.world(seed)
+        return make_sim_hal(world, sources=self.sources(world, seed, fs=self.localizer.fs),
+                            acoustic_config=self.acoustic_config(seed))
+
 
 _SPEAKER_CYCLE = ("male", "female", "male_low", "female_high", "child", "elderly_male", "male_high", "female_low")
 
