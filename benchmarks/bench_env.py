@@ -25,8 +25,6 @@ import platform  # noqa: E402
 import time  # noqa: E402
 from collections import defaultdict  # noqa: E402
 
-import numpy as np  # noqa: E402
-
 import gymnasium as gym  # noqa: E402
 
 from ssl_sim.envs import EnvConfig, SSLRescueEnv  # noqa: E402

@@ -64,8 +64,9 @@ def main(argv: list[str] | None = None) -> dict:
              f"{cfg.settle_s:g} s settle + {cfg.listen_s:g} s listen; found within {cfg.found_radius_m:g} m; "
              f"time limit {args.max_steps} steps ({args.max_steps * cfg.step_s:g} s); seeds "
              f"{seeds.start}..{seeds.stop - 1}; wall time {wall:.0f} s")
-    per_seed = "\n".join(f"| {r.policy} | {r.seed} | {r.scene} | {int(r.success)} | {r.steps} | {r.path_length_m:.2f} | "
-                         f"{r.shortest_path_m:.2f} | {r.spl:.3f} | {r.collisions} |" for r in results)
+    per_seed = "\n".join(f"| {r.policy} | {r.seed} | {r.scene} | {int(r.success)} | {r.steps} | "
+                         f"{r.path_length_m:.2f} | {r.shortest_path_m:.2f} | {r.spl:.3f} | {r.collisions} |"
+                         for r in results)
     md = (f"# Baseline policies on SSLRescue-v0\n\n{setup}\n\n{table}\n\n"
           "SPL = success x shortest path / max(path taken, shortest path); shortest path on the free-space "
           "grid (16-connected, obstacles grown by the bumper radius) to within the found radius of each victim.\n\n"

@@ -266,3 +266,45 @@ def test_async_vector_env_with_two_workers():
         assert np.all(np.isfinite(rew)) and obs["odometry"].dtype == np.float32
     finally:
         venv.close()
+
+
+def test_scenario_mode_uses_the_scenario_world_victims_and_radius():
+    env = SSLRescueEnv(EnvConfig(scenario="paper_lab"))
+    obs, info = env.reset(seed=0)
+    assert env.world.name == "empty_lab" and info["n_victims"] == 1
+    assert env.world.victims[0].position == (4.496, 2.895, 0.1)       # the scenario's caller, not the scene's
+    assert env._ep.found_radius == 0.75 and env._ep.acoustics.ism_order == 2   # fast: order capped at 2
+    assert abs(_wrap_deg(_az_deg(obs) + 4.0)) < 5.0
+    for _ in range(12):
+        obs, r, term, *_ = env.step(FORWARD)
+        if term:
+            break
+    assert term and env.victims_found.all()
+    env.close()
+
+
+def test_rerun_logging_records_episodes_on_one_timeline(tmp_path):
+    from rerun.chunk import RrdReader
+
+    path = tmp_path / "env.rrd"
+    env = SSLRescueEnv(SMALL_CFG.with_overrides(rerun=f"save:{path}"))
+    for seed in (1, 2):
+        env.reset(seed=seed)
+        for _ in range(3):
+            env.step(FORWARD)
+    env.close()
+    chunks = RrdReader(path).stream().to_chunks()
+    entities = {ch.entity_path for ch in chunks}
+    for e in ("/world/room", "/world/victims", "/world/robot", "/world/robot/array/srp_map",
+              "/world/robot/array/truth", "/world/trail", "/plots/reward", "/log/behaviour"):
+        assert e in entities, (e, sorted(entities))
+    times = []
+    for ch in chunks:
+        rb = ch.to_record_batch()
+        if ch.entity_path == "/plots/reward" and "sim_time" in rb.schema.names:
+            times += [v / 1e9 for v in rb.column("sim_time").cast("int64").to_pylist()]
+    times = sorted(times)
+    assert len(times) == 6 and np.all(np.diff(times) > 0)     # the second episode follows the first
+    assert times[3] - times[2] > 1.0
+    with pytest.raises(ValueError, match="rerun"):
+        EnvConfig(rerun="upload:somewhere")

@@ -92,6 +92,7 @@ class EnvConfig:
     reward: RewardConfig = field(default_factory=RewardConfig)
     # -- output -----------------------------------------------------------------------------------
     render_size: tuple[int, int] = (240, 320)  # rgb_array image (height, width)
+    rerun: str | None = None            # log episodes with ssl_sim.viz: "save:PATH.rrd" | "spawn" | "connect[:ADDR]"
 
     def __post_init__(self) -> None:
         def need(ok: bool, name: str, expected: str) -> None:
@@ -123,6 +124,10 @@ class EnvConfig:
         need(0 <= self.min_power < 1, "min_power", "0 <= power < 1")
         need(0 < self.found_radius_m <= 3, "found_radius_m", "0 < m <= 3")
         need(0 < self.tip_limit_deg < 90, "tip_limit_deg", "0 < deg < 90")
+        if self.rerun is not None:
+            from ssl_sim.viz import parse_rerun_target
+
+            parse_rerun_target(self.rerun)  # raises naming the expected forms
         h, w = self.render_size
         need(16 <= h <= 2048 and 16 <= w <= 2048, "render_size", "(height, width) in 16..2048 pixels")
 

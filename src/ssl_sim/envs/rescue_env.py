@@ -50,7 +50,6 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from robot.kinematics import forward_kinematics
 from robot.odometry import Odometry, wrap_angle
 from ssl_core.localizer import Localizer, LocalizerConfig
 from ssl_sim.acoustics import AcousticConfig, AcousticSimulator, AmbientNoise
@@ -79,6 +78,7 @@ class _Episode:
     acoustics: AcousticSimulator
     audio: SimAudioSource
     geodesic: GeodesicMap
+    sources: list
     found_radius: float
     shortest_path: float
 
@@ -120,7 +120,8 @@ class SSLRescueEnv(gym.Env):
             raise ValueError(f"config: expected an EnvConfig, got {type(cfg).__name__}")
         self.config = cfg = cfg.with_overrides(**overrides) if overrides else cfg
         if render_mode is not None and render_mode not in self.metadata["render_modes"]:
-            raise ValueError(f"render_mode: expected None or one of {self.metadata['render_modes']}, got {render_mode!r}")
+            raise ValueError(f"render_mode: expected None or one of {self.metadata['render_modes']}, "
+                             f"got {render_mode!r}")
         self.render_mode = render_mode
         self.metadata = {**self.metadata, "render_fps": max(1, int(round(1.0 / cfg.step_s)))}
         self._scenario = None
@@ -152,6 +153,14 @@ class SSLRescueEnv(gym.Env):
         self._ep: _Episode | None = None
         self._renderer = None
         self._renderer_model = None
+        self._logger = None
+        self._log_t0 = 0.0   # rerun timeline: episodes follow each other
+        self._steps_logged = 0
+        self._sim_time_prev = 0.0
+        if cfg.rerun is not None:
+            from ssl_sim.viz import make_logger
+
+            self._logger = make_logger(cfg.rerun, recording_name=f"SSLRescue-v0 ({cfg.fidelity})")
 
     # ------------------------------------------------------------------ episodes
     def _build(self, episode_seed: int) -> _Episode:
@@ -177,15 +186,15 @@ class SSLRescueEnv(gym.Env):
                 else:
                     world = self._generate(rng, episode_seed)
                 sources = episode_victims(world, rng, cfg.victim_sound, cfg.victim_level_db_spl, FS)
-                ac = AcousticConfig(seed=acoustic_seed, rt60_s=cfg.rt60_s, ambient=AmbientNoise(cfg.noise_db_spl, "hvac"),
-                                    **FIDELITY_ACOUSTICS[cfg.fidelity])
+                ac = AcousticConfig(seed=acoustic_seed, rt60_s=cfg.rt60_s,
+                                    ambient=AmbientNoise(cfg.noise_db_spl, "hvac"), **FIDELITY_ACOUSTICS[cfg.fidelity])
                 found_radius = cfg.found_radius_m
             robot = SimRobot(world)
             acoustics = AcousticSimulator(world, ac, sources)
-        audio = SimAudioSource(robot, acoustics, still_tolerance_m=2e-3)
+        audio = SimAudioSource(robot, acoustics)
         geo = GeodesicMap(world, found_radius)
         start = world.robot_start[:2]
-        return _Episode(world, len(world.victims), robot, acoustics, audio, geo, found_radius,
+        return _Episode(world, len(world.victims), robot, acoustics, audio, geo, list(sources), found_radius,
                         geo.shortest_tour(start))
 
     def _generate(self, rng: np.random.Generator, episode_seed: int) -> World:
@@ -233,6 +242,8 @@ class SSLRescueEnv(gym.Env):
         obs, _ = self._listen_and_observe(np.zeros(3), np.zeros(3), False)
         info = self._info(collided=False)
         info["shortest_path_m"] = ep.shortest_path
+        if self._logger is not None:
+            self._log_reset()
         return obs, info
 
     # ------------------------------------------------------------------ stepping
@@ -279,6 +290,8 @@ class SSLRescueEnv(gym.Env):
             info["tipped_over"] = True
         if physics_error is not None:
             info["physics_error"] = physics_error
+        if self._logger is not None:
+            self._log_step(a, reward, info, newly)
         return obs, float(reward), terminated, False, info
 
     def _advance(self, duration: float) -> bool:
@@ -454,8 +467,53 @@ class SSLRescueEnv(gym.Env):
         self._renderer = None
         self._renderer_model = None
 
+    # ------------------------------------------------------------------ rerun (ssl_sim.viz)
+    def _log_reset(self) -> None:
+        ep, lg = self._ep, self._logger
+        if self._steps_logged:
+            self._log_t0 += self._sim_time_prev + 1.0  # a 1 s gap between episodes on the timeline
+        self._steps_logged = 0
+        self._trail = [self._robot_xyz()]
+        lg.start(ep.world, ep.sources, ep.robot.config, title=f"episode seed {self.episode_seed}: {ep.world.name}")
+        self._log_robot_and_listen()
+
+    def _log_step(self, action, reward: float, info: dict, newly: int) -> None:
+        lg, t = self._logger, self._log_t0 + self.sim_time
+        self._steps_logged += 1
+        self._sim_time_prev = self.sim_time
+        self._trail.append(self._robot_xyz())
+        lg.trail(t, np.array(self._trail))
+        self._log_robot_and_listen()
+        lg.scalars(t, {"reward": reward, "distance_to_victim_m": info["distance_to_target_m"]})
+        lg.event(t, "step", f"step {self._steps}: action {np.round(action, 2).tolist()}, reward {reward:+.3f}"
+                 + (f", {newly} victim(s) found" if newly else ""))
+        if newly:
+            found = [ep_v.position for ep_v, f in zip(self._ep.world.victims, self._found) if f]
+            lg.found(t, np.array(found), [s.name for s, f in zip(self._ep.sources, self._found) if f])
+
+    def _robot_xyz(self) -> np.ndarray:
+        p = self._ep.robot.pose()
+        return np.array([p.x, p.y, p.z])
+
+    def _log_robot_and_listen(self) -> None:
+        from ssl_sim.backends import array_frame_directions
+
+        ep, lg, t = self._ep, self._logger, self._log_t0 + self.sim_time
+        robot, p = ep.robot, ep.robot.pose()
+        lg.robot(t, np.array([p.x, p.y, p.z]), p.quat, robot.mic_positions(), robot.wheel_odometry().wheel_speeds)
+        res = self._last_result
+        dets = [{"direction": d.direction, "azimuth_deg": d.azimuth_deg, "elevation_deg": d.elevation_deg,
+                 "power": d.power} for d in res.detections]
+        az, el, _ = array_frame_directions(robot, [s.position for s in ep.sources])
+        truth = [{"direction": np.array([math.cos(e) * math.cos(a), math.cos(e) * math.sin(a), math.sin(e)]),
+                  "kind": s.kind, "name": s.name} for s, a, e in zip(ep.sources, az, el)]
+        lg.listen(t, res.srp_map, self.coarse_directions, dets, truth)
+
     def close(self) -> None:
         self._close_renderer()
+        if self._logger is not None:
+            self._logger.close()
+            self._logger = None
         super().close()
 
     # ------------------------------------------------------------------ introspection
