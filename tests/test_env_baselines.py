@@ -24,7 +24,7 @@ SMALL = RubbleConfig(room_size=(4.0, 3.5, 2.6), block_coverage=0.05, debris_cove
 CFG = EnvConfig(rubble=SMALL, min_start_distance_m=1.0)
 
 
-def _obs(dets=(), bumper=0, odometry=(0.0, 0.0, 0.0)):
+def _obs(dets=(), bumper=0, odometry=(0.0, 0.0, 0.0), found=0):
     """A synthetic observation with detections given as (az deg, el deg, power, level dB)."""
     K = 3
     d = np.zeros((K, 5), np.float32)
@@ -34,7 +34,7 @@ def _obs(dets=(), bumper=0, odometry=(0.0, 0.0, 0.0)):
         d[i] = (math.cos(a), math.sin(a), math.sin(e), p, (lvl - LEVEL_FLOOR_DB) / 100.0)
         m[i] = 1
     return {"detections": d, "detection_mask": m, "bumper": np.array([bumper], np.int8),
-            "odometry": np.asarray(odometry, np.float32)}
+            "odometry": np.asarray(odometry, np.float32), "found": np.array([found], np.int8)}
 
 
 def test_decode_detections_inverts_the_observation_layout():
@@ -73,6 +73,19 @@ def test_heuristic_keeps_going_toward_a_source_that_fell_silent_then_explores():
     for _ in range(3):
         a = pol(_obs())
     assert a[0] > 0 and a[1] == 0 and a[2] == 0      # then explores straight ahead
+
+
+def test_heuristic_ignores_a_found_victim_and_explores_away_from_it():
+    pol = LoudestSourcePolicy(CFG)
+    pol(_obs([(0.0, -15.0, 0.5, -20.0)]))                         # target straight ahead
+    pol(_obs([(0.0, -30.0, 0.5, -15.0)], odometry=(0.3, 0, 0), found=1))   # ... and found there
+    # it keeps calling, louder than anyone: ignored; the fainter one at +90 deg is the target now
+    a = pol(_obs([(2.0, -35.0, 0.5, -12.0), (90.0, 0.0, 0.2, -35.0)]))
+    assert a[2] > 0.5
+    # only the found one heard: nothing to approach; after the silent steps, explore away from it
+    for _ in range(5):
+        a = pol(_obs([(0.0, -35.0, 0.5, -12.0)]))
+    assert a[0] < -0.5 and a[2] == 0.0          # backwards = away from the victim ahead
 
 
 def test_spl_and_success_bookkeeping():

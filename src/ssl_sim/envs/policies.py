@@ -4,11 +4,12 @@
 - :class:`LoudestSourcePolicy`: the paper's heuristic as a policy - turn toward and drive to the
   loudest detected source - with ``robot.rescue``'s parameters (``RescueConfig``: turn tolerance,
   drive and turn speeds, target keeping by ``switch_ratio_db`` and ``track_gate_deg``, silent
-  listens before exploring, back off + sidestep on a bump). ``RescueBehaviour`` itself runs on a
-  HAL with its own listen/act timing; its target choice is a private method of that state
-  machine, so the few rules used here are restated from it (not the voice scoring, found-victim
-  exclusion or odometry-feedback motion primitives, which an environment step does not need:
-  the environment declares victims found).
+  listens before exploring, back off + sidestep on a bump, found victims ignored afterwards
+  (``exclusion_deg`` / ``exclusion_radius_m`` gate around their remembered positions) and
+  exploring away from the nearest one). ``RescueBehaviour`` itself runs on a HAL with its own
+  listen/act timing and its target choice is a private method of that state machine, so the few
+  rules used here are restated from it (not the voice scoring, found criteria or the
+  odometry-feedback motion primitives: the environment declares victims found).
 
 A policy is a callable ``policy(obs) -> action`` with ``reset()`` at episode start.
 """
@@ -75,10 +76,12 @@ class LoudestSourcePolicy:
     """Turn toward and drive to the loudest source (the paper's rule), see the module docstring.
 
     Per step: bumper pressed -> back off and sidestep (same side, the other after ``2`` bumps in
-    a row); else the target is the loudest detection, the current one kept while a detection
-    lies within ``track_gate_deg`` of its remembered bearing and the loudest is less than
+    a row); detections pointing at a victim already found are dropped; the target is the
+    loudest, the current one kept while a detection lies within ``track_gate_deg`` of its
+    remembered bearing and the loudest is less than
     ``switch_ratio_db`` louder; without detections the last target bearing is kept for
-    ``explore_after_silent`` steps, then the robot explores straight ahead. Toward the target:
+    ``explore_after_silent`` steps, then the robot explores straight ahead (away from the nearest
+    found victim, whose calls mask the others). Toward the target:
     turn at up to ``turn_speed`` and, once it is within 60 degrees of ahead, translate along its
     azimuth at ``drive_speed`` (half that when the elevation says it is within ``bump_found_range_m``)."""
 
@@ -94,18 +97,24 @@ class LoudestSourcePolicy:
         self.silent = 0
         self.bumps = 0
         self.side = 1.0
+        self.found: list[np.ndarray] = []   # remembered positions of found victims (policy's frame)
 
     def __call__(self, obs) -> np.ndarray:
         cfg, env = self.rescue, self.env_config
         self.pose = compose(self.pose, obs["odometry"])
+        if obs["found"][0] and self.target_bearing is not None:
+            # The victim being approached was found: it is within reach, along the target bearing.
+            self.found.append(self.pose[:2] + 0.5 * np.array([math.cos(self.target_bearing),
+                                                               math.sin(self.target_bearing)]))
+            self.target_bearing = self.target_level = None
         if obs["bumper"][0]:
             self.bumps += 1
             if self.bumps > 2:
                 self.side, self.bumps = -self.side, 1
             return np.array([-0.6, 0.8 * self.side, 0.0], np.float32)
         self.bumps = 0
-        heard = decode_detections(obs)
         yaw = float(self.pose[2])
+        heard = [h for h in decode_detections(obs) if not self._is_found(yaw + h.azimuth)]
         target = self._choose(heard, yaw)
         if target is not None:
             self.silent = 0
@@ -115,9 +124,30 @@ class LoudestSourcePolicy:
             self.silent += 1
             if self.target_bearing is None or self.silent > cfg.explore_after_silent:
                 self.target_bearing = None
-                return np.array([cfg.drive_speed / env.max_speed, 0.0, 0.0], np.float32)  # explore ahead
+                return self._explore(yaw)
             az, el = float(wrap_angle(self.target_bearing - yaw)), None
         return self._toward(az, el)
+
+    def _is_found(self, bearing: float) -> bool:
+        """Whether a bearing (policy frame, rad) points at a victim already found."""
+        cfg = self.rescue
+        for p in self.found:
+            dx, dy = p - self.pose[:2]
+            dist = max(math.hypot(dx, dy), 1e-6)
+            gate = max(math.radians(cfg.exclusion_deg), math.atan2(cfg.exclusion_radius_m, dist))
+            if abs(wrap_angle(bearing - math.atan2(dy, dx))) <= gate:
+                return True
+        return False
+
+    def _explore(self, yaw: float) -> np.ndarray:
+        """Straight ahead, or away from the nearest found victim."""
+        heading = 0.0
+        if self.found:
+            p = min(self.found, key=lambda q: float(np.hypot(*(q - self.pose[:2]))))
+            dx, dy = self.pose[:2] - p
+            heading = float(wrap_angle(math.atan2(dy, dx) - yaw))
+        v = self.rescue.drive_speed / self.env_config.max_speed
+        return np.array([v * math.cos(heading), v * math.sin(heading), 0.0], np.float32)
 
     def _choose(self, heard: list[Heard], yaw: float) -> Heard | None:
         if not heard:

@@ -24,6 +24,8 @@ axes, azimuth CCW from forward, elevation up from horizontal):
 - ``velocity`` (3,): mean body twist from the encoders over the drive phase (m/s, m/s, rad/s),
   clipped to +-2 m/s, +-8 rad/s.
 - ``bumper`` (1,) int8: 1 if the bumper was pressed at any time in the step.
+- ``found`` (1,) int8: 1 if a victim was declared found at the end of this step (the robot is
+  told, as a rescuer would be; the found victim keeps calling).
 - ``audio`` (8, n) (``include_audio``): the listen window, float in [-1, 1) (int16 / 32768).
 
 Reward (``RewardConfig``): shortest-path progress toward the nearest victim not yet found
@@ -143,6 +145,7 @@ class SSLRescueEnv(gym.Env):
             "velocity": spaces.Box(np.array([-2, -2, -8], np.float32), np.array([2, 2, 8], np.float32),
                                    dtype=np.float32),
             "bumper": spaces.MultiBinary(1),
+            "found": spaces.MultiBinary(1),
         }
         if cfg.include_audio:
             obs["audio"] = spaces.Box(-1.0, 1.0, (8, self.n_listen), np.float32)
@@ -274,6 +277,7 @@ class SSLRescueEnv(gym.Env):
         self._steps += 1
         self._collisions += int(collided)
         newly = self._update_found()
+        obs["found"][0] = int(newly > 0)
         tilt = math.degrees(robot.pose().tilt)
         tipped = tilt > cfg.tip_limit_deg or physics_error is not None
         d_after = ep.geodesic.distance(target, self._xy) if target is not None else 0.0
@@ -336,6 +340,7 @@ class SSLRescueEnv(gym.Env):
             "odometry": self._body_delta(pose0, pose1, self.observation_space["odometry"]),
             "velocity": self._body_delta(pose0, pose_drive, self.observation_space["velocity"], 1.0 / cfg.control_s),
             "bumper": np.array([collided or bump_end], np.int8),
+            "found": np.zeros(1, np.int8),
         }
         if cfg.include_audio:
             x = np.asarray(samples)
