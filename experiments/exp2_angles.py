@@ -74,6 +74,7 @@ def run(quick: bool = False, out_dir: Path = RESULTS, seed0: int = 0) -> Outcome
         data = [[r[key] for r in sel("table1", *TABLE1[i][0])] for i in rows_used]
         ax.boxplot(data, positions=[i + 1 for i in rows_used])
         ax.set_xticks(range(1, len(TABLE1) + 1), labels)
+        ax.set_xlim(0.5, len(TABLE1) + 0.5)
         paper = [float(np.asarray(TABLE1[i][1])[idx] - np.asarray(TABLE1[i][0])[idx]) for i in rows_used]
         if idx == 0:
             paper = [float((p + 180) % 360 - 180) for p in paper]

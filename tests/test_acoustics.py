@@ -4,7 +4,6 @@ Truth is independent of the simulator: analytic distances/delays, the inverse-di
 Eyring's formula, the diffuse-field coherence sinc(kd), and the geometry we place."""
 from __future__ import annotations
 
-import warnings
 
 import numpy as np
 import pytest
