@@ -217,3 +217,29 @@ def test_parse_errors_without_a_file():
         parse_scenario({"scene": {"name": "empty_lab", "use_scene_victims": False}})
     with pytest.raises(ScenarioError, match=r"seed: expected an integer >= 0"):
         load_scenario("paper_lab").with_overrides(seed=-1)
+
+
+def test_driving_into_a_wall_is_one_collision_at_the_wall(tmp_path):
+    text = """
+name = "wall"
+[scene]
+name = "empty_lab"             # 7 x 6 m
+[robot]
+start = [6.4, 3.0, 0.0]        # 0.6 m from the x = 7 m wall, facing it
+[[victims]]
+position = [1.0, 1.0, 0.1]
+[acoustics]
+rt60_s = 0.3
+max_rir_s = 0.4
+"""
+    run = RescueRun(load_scenario(_write(tmp_path, text)))
+    run.drive.set_twist(0.25, 0.0, 0.0)
+    for _ in range(80):  # 4 s: reaches the wall after ~1.8 s, then keeps pushing
+        run.clock.sleep(0.05)
+    run.drive.stop()
+    assert len(run.collisions) == 1
+    c = run.collisions[0]
+    assert c["obstacle"] is None and c["position"][0] == pytest.approx(7.0, abs=0.02)
+    # The bumper (radius 0.16 m) touches first: the robot centre stops ~0.16 m short of the wall.
+    assert run.trajectory[-1][1] == pytest.approx(7.0 - 0.16, abs=0.03)
+    assert 1.0 < c["time_s"] < 3.0

@@ -21,7 +21,8 @@ def _run(args: argparse.Namespace) -> int:
     from ssl_sim.runner import format_summary, run_scenario
 
     sc = load_scenario(args.scenario)
-    out = Path(args.out) if args.out else Path("out") / "runs" / f"{sc.name}_seed{args.seed if args.seed is not None else sc.seed}"
+    seed = args.seed if args.seed is not None else sc.seed
+    out = Path(args.out) if args.out else Path("out") / "runs" / f"{sc.name}_seed{seed}"
     result = run_scenario(sc, seed=args.seed, time_limit_s=args.time_limit, rerun=args.rerun, out_dir=out,
                           progress=not args.quiet)
     print(format_summary(result))

@@ -12,7 +12,8 @@ What is measured (all from the simulator's truth, never from the robot's own est
   at or before ``time_limit_s`` count. The run ends when every victim is found, the behaviour
   finishes (stuck, fault, ``max_victims``) or the time limit passes (at the next step boundary).
 * **path**: length of the true horizontal path of the base; **collisions**: contact episodes of
-  the robot with walls or non-climbable obstacles (rising edges, sampled every control tick).
+  the robot with walls or non-climbable obstacles (sampled every control tick; contacts less than
+  ``COLLISION_GAP_S`` apart belong to one episode).
 * **shortest paths**: geodesic distance on a 5 cm occupancy grid of the free space (obstacles
   inflated by the bumper radius, 8-connected, Dijkstra with ``scipy.sparse.csgraph``) from where
   a leg starts to anywhere within ``success_radius_m`` of the victim; straight-line lower bounds
@@ -40,15 +41,18 @@ from robot.odometry import wrap_angle
 from robot.rescue import RescueBehaviour, RescueEvent
 from ssl_core.geometry import cube8
 from ssl_core.localizer import Localizer
+from ssl_sim.acoustics import AcousticSimulator
 from ssl_sim.backends import SimAudioSource, array_frame_directions
 from ssl_sim.physics import SimClock, SimDriveBase, SimRobot
 from ssl_sim.physics.scene_gen import ROBOT_RADIUS, free_space_grid
 from ssl_sim.scenario import Scenario, load_scenario
 from ssl_sim.viz import NullLogger, RunLogger, make_logger
 from ssl_sim.world import World
-from ssl_sim.acoustics import AcousticSimulator
 
 __all__ = ["RescueRun", "run_scenario", "write_results", "FreeSpacePaths"]
+
+#: A robot contact with a wall or blocking obstacle after this long without one is a new collision (s).
+COLLISION_GAP_S = 0.5
 
 
 # ----------------------------------------------------------------------------- shortest paths
@@ -186,7 +190,7 @@ class RescueRun:
         self.trajectory: list[tuple[float, float, float, float, float]] = []  # t, x, y, z, yaw
         self.cum_path: list[float] = []
         self.collisions: list[dict] = []
-        self._in_contact = False
+        self._last_contact_t = -math.inf
         self.listens: list[dict] = []
         self.found: dict[int, dict] = {}
         self.false_positives: list[dict] = []
@@ -217,13 +221,19 @@ class RescueRun:
         self._record_pose()
         touching = None
         for c in self.robot.contacts():
-            if c.obstacle is None or (0 <= c.obstacle < len(self._obstacle_blocks) and self._obstacle_blocks[c.obstacle]):
+            blocking = c.obstacle is None or (0 <= c.obstacle < len(self._obstacle_blocks)
+                                              and self._obstacle_blocks[c.obstacle])
+            if blocking:
                 touching = c
                 break
-        if touching is not None and not self._in_contact:
-            self.collisions.append({"time_s": _r(self.robot.time, 2), "position": [_r(v) for v in touching.position],
-                                    "obstacle": touching.obstacle, "geom": touching.world_geom})
-        self._in_contact = touching is not None
+        now = self.robot.time
+        # One collision per contact episode: contacts chatter while pushing, so a new episode needs
+        # COLLISION_GAP_S without contact before it.
+        if touching is not None:
+            if now - self._last_contact_t > COLLISION_GAP_S:
+                self.collisions.append({"time_s": _r(now, 2), "position": [_r(v) for v in touching.position],
+                                        "obstacle": touching.obstacle, "geom": touching.world_geom})
+            self._last_contact_t = now
 
     def _on_block(self, block, mics) -> None:
         self._last_block = (int(round(block.timestamp * block.sample_rate)), block.samples.shape[1])
@@ -291,9 +301,9 @@ class RescueRun:
             if self.logger.enabled:
                 level = "WARN" if ev.decision in ("recover", "stuck", "drive_fault", "error") else "INFO"
                 self.logger.event(ev.time, ev.state.value, str(ev), level)
-                if ev.decision == "target":
-                    _, x, y, z, yaw = self._pose_at(ev.time)
-                    origin, rot = self.robot.array_pose()
+                if ev.decision == "target" and self.audio.last_array_poses:
+                    # Decided right after the listen: the array pose at the end of that block.
+                    origin, rot = self.audio.last_array_poses[-1]
                     self.logger.target(ev.time, origin, rot @ _unit(ev.data["azimuth"], ev.data["elevation"]))
             if ev.decision != "victim_found":
                 continue
@@ -469,7 +479,8 @@ def format_summary(result: dict) -> str:
              f"(limit {r['time_limit_s']:g} s, end: {r['end_reason']})"]
     for v in r["victims"]:
         if v["found"]:
-            lines.append(f"  {v['name']:<14} found at {v['time_s']:6.1f} s, robot {v['robot_distance_m']:.2f} m from it, "
+            lines.append(f"  {v['name']:<14} found at {v['time_s']:6.1f} s, robot {v['robot_distance_m']:.2f} m "
+                         "from it, "
                          f"estimate off by {v['estimate_error_m']:.2f} m; leg {v['leg_path_m']:.2f} m driven vs "
                          f"{v['leg_shortest_path_m']:.2f} m shortest (SPL {v['spl']:.2f}); {v['criterion']}")
         else:
