@@ -318,7 +318,8 @@ def test_firmware_parser_agrees_with_python_reference_on_random_streams(board, d
     t0 = drive.telemetry()
     drive._ser.write(bytes(stream))
     drive._ser.flush()
-    time.sleep(len(stream) * 11 / 117647 + 0.3)          # line time + replies + inter-byte timeout
+    # line time + replies + inter-byte timeout, with margin for a simulated board lagging under CPU load
+    time.sleep(len(stream) * 11 / 117647 + 1.5)
     drive.stop()
     t1 = drive.telemetry()
     assert t1.rx_overflows == t0.rx_overflows           # the MCU never stalls its receive path
