@@ -139,7 +139,8 @@ class Localizer:
         self._fine_pos = (tdoa_f * cfg.fs * cfg.upsample).astype(np.float32)  # lag of each fine point, per pair
         self._lag_axis = np.arange(-self._max_lag, self._max_lag + 1, dtype=np.float32)
         chunk_s = cfg.window_frames * cfg.hop / cfg.fs
-        self._noise = NoiseFloor(max(1, int(np.ceil(cfg.noise_memory_s / chunk_s)))) if cfg.noise_suppression else None
+        self._noise_memory = max(1, int(np.ceil(cfg.noise_memory_s / chunk_s)))
+        self._noise = self._new_floor()  # the streaming path's floor
         self._lag_steering = LagSteering(self._omega, self._lag_axis / (cfg.fs * cfg.upsample))
         # Masking a found source: half the GCC main lobe, 1 / (2 f_high).
         f_high = cfg.band_hz[1] if cfg.band_hz else cfg.fs / 2
@@ -165,7 +166,7 @@ class Localizer:
         self._pending_ms = np.zeros(0)
         self._start_time = float(start_time)
         self._frames_done = 0  # frames already emitted in windows
-        if getattr(self, "_noise", None) is not None:
+        if self._noise is not None:
             self._noise.reset()
 
     # ------------------------------------------------------------------ input
@@ -217,7 +218,7 @@ class Localizer:
         while self._pending_ms.size >= w:
             self._frames_done += w
             t_end = self._start_time + ((self._frames_done - 1) * cfg.hop + cfg.frame_size) / cfg.fs
-            out.append(self._window_result(self._pending_spec[:, :w], self._pending_ms[:w], t_end))
+            out.append(self._window_result(self._pending_spec[:, :w], self._pending_ms[:w], t_end, self._noise))
             self._pending_spec = self._pending_spec[:, w:]
             self._pending_ms = self._pending_ms[w:]
         return out
@@ -236,12 +237,8 @@ class Localizer:
             )
         spec, ms = self._analyse(x)
         t_end = ((ms.size - 1) * self.config.hop + self.config.frame_size) / self.config.fs
-        if self._noise is not None:  # a whole recording learns its own floor
-            self._noise.reset()
-        result = self._window_result(spec, ms, t_end)
-        if self._noise is not None:
-            self._noise.reset()
-        return result
+        # a whole recording learns its own floor and leaves the streaming state alone
+        return self._window_result(spec, ms, t_end, self._new_floor())
 
     def srp_fine(self, result_or_gcc: np.ndarray) -> np.ndarray:
         """SRP power on the whole fine grid for a GCC (pairs, lags) - for plots, not for the hot path."""
@@ -251,9 +248,7 @@ class Localizer:
         """Window-summed GCC (pairs, lags) of a recording; use with :meth:`srp_fine` for full-resolution maps."""
         spec, ms = self._analyse(self._check(recording, fs))
         active = self._active(ms)
-        weights = self._bin_weights(spec)
-        if self._noise is not None:
-            self._noise.reset()
+        weights = self._bin_weights(spec, self._new_floor())
         return self._gcc(spec[:, active], None if weights is None else weights[active])
 
     # ------------------------------------------------------------------ internals
@@ -267,23 +262,25 @@ class Localizer:
         cross = summed_phat_cross_spectra(spec, self.pairs, weights)
         return self._lag_steering(cross / max(spec.shape[1], 1))
 
-    def _bin_weights(self, spec: np.ndarray) -> np.ndarray | None:
-        """Noise-suppression weights (frames, bins), updating the floor chunk by chunk as streaming would."""
-        if self._noise is None:
+    def _new_floor(self) -> NoiseFloor | None:
+        return NoiseFloor(self._noise_memory) if self.config.noise_suppression else None
+
+    def _bin_weights(self, spec: np.ndarray, floor: NoiseFloor | None) -> np.ndarray | None:
+        """Noise-suppression weights (frames, bins), updating ``floor`` chunk by chunk as streaming would."""
+        if floor is None:
             return None
         power = (spec.real**2 + spec.imag**2).mean(axis=0)
         w = self.config.window_frames
-        return np.concatenate([self._noise.weights(power[k:k + w]) for k in range(0, power.shape[0], w)]) \
+        return np.concatenate([floor.weights(power[k:k + w]) for k in range(0, power.shape[0], w)]) \
             if power.shape[0] else power
 
-    def _window_result(self, spec, ms, t_end: float) -> LocalizationResult:
+    def _window_result(self, spec, ms, t_end: float, floor: NoiseFloor | None) -> LocalizationResult:
         active = self._active(ms)
+        weights = self._bin_weights(spec, floor)  # the floor learns from quiet windows too
         n_active = int(active.sum())
         if n_active == 0:
-            self._bin_weights(spec)  # the noise floor still learns from quiet windows
             return LocalizationResult(t_end, [], np.zeros(self.coarse_grid.n_points), 0)
         level = float(10 * np.log10(ms[active].mean() / _FULL_SCALE_SINE_MS))
-        weights = self._bin_weights(spec)
         spec_a = spec[:, active]
         srp_map, peaks = self._search(self._gcc(spec_a, None if weights is None else weights[active]))
         detections = []
