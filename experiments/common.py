@@ -13,6 +13,8 @@ source below the array: we raise the array on a stand, as in a lab set-up, and s
 """
 from __future__ import annotations
 
+import argparse
+
 import csv
 import time
 from dataclasses import dataclass, field
@@ -248,3 +250,12 @@ class Timer:
 
 __all__ = ["Lab", "Truth", "build_sim", "record", "localizer", "match", "score", "wrap_deg", "write_csv", "read_csv",
            "md_table", "Outcome", "Timer", "RESULTS", "LOCALIZER_NOTE", "POOLED_NOTE", "pooled_localize"]
+
+
+def script_main(run, doc: str | None) -> None:
+    """Command line of one experiment script: ``[--quick] [--out DIR]``, prints its markdown."""
+    ap = argparse.ArgumentParser(description=doc)
+    ap.add_argument("--quick", action="store_true")
+    ap.add_argument("--out", type=Path, default=RESULTS)
+    a = ap.parse_args()
+    print(run(a.quick, a.out).markdown)

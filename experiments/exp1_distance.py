@@ -7,12 +7,12 @@ source at 3 m (2.12 m below the array) stays above the floor (0.28 m).
 """
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import numpy as np
 
-from experiments.common import RESULTS, Lab, Outcome, Timer, Truth, localizer, md_table, record, score, write_csv
+from experiments.common import (RESULTS, Lab, Outcome, Timer, Truth, localizer, md_table, record, score,
+                                script_main, write_csv)
 
 AZ, EL = -4.0, -45.0
 LAB = Lab(array_height_m=2.4)
@@ -24,21 +24,20 @@ def run(quick: bool = False, out_dir: Path = RESULTS, seed0: int = 0) -> Outcome
     distances = np.round(np.arange(0.5, 3.0001, 0.5 if quick else 0.1), 2)
     trials = 2 if quick else 10
     rows = []
+
+    def trials_at(lab: Lab, setup: str, d: float) -> None:
+        truth = Truth(AZ, EL, float(d))
+        for k in range(trials):
+            seed = seed0 + 100 * k + int(round(d * 100))
+            res = localizer(1).locate(record(lab, [truth], seed))
+            det = res.detections[0] if res.detections else None
+            rows.append({"setup": setup, "distance_m": float(d), "trial": k, "seed": seed, **score(det, truth)})
+
     with Timer() as tm:
         for d in distances:
-            truth = Truth(AZ, EL, float(d))
-            for k in range(trials):
-                seed = seed0 + 100 * k + int(round(d * 100))
-                res = localizer(1).locate(record(LAB, [truth], seed))
-                det = res.detections[0] if res.detections else None
-                rows.append({"setup": "lab", "distance_m": float(d), "trial": k, "seed": seed, **score(det, truth)})
+            trials_at(LAB, "lab", d)
         for d in distances[::5] if not quick else distances[-1:]:
-            truth = Truth(AZ, EL, float(d))
-            for k in range(trials):
-                seed = seed0 + 100 * k + int(round(d * 100))
-                res = localizer(1).locate(record(HIGH, [truth], seed))
-                det = res.detections[0] if res.detections else None
-                rows.append({"setup": "high_room", "distance_m": float(d), "trial": k, "seed": seed, **score(det, truth)})
+            trials_at(HIGH, "high_room", d)
     out_dir.mkdir(parents=True, exist_ok=True)
     write_csv(out_dir / "exp1_distance.csv", rows)
 
@@ -120,12 +119,7 @@ stays >= 1.5 m above the floor:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--out", type=Path, default=RESULTS)
-    a = ap.parse_args()
-    o = run(a.quick, a.out)
-    print(o.markdown)
+    script_main(run, __doc__)
 
 
 if __name__ == "__main__":

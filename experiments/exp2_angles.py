@@ -10,13 +10,13 @@ errors. el = -90 deg at 150 cm puts the source 1.5 m below the array: the array 
 """
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import numpy as np
 
-from experiments.common import (LOCALIZER_NOTE, RESULTS, Lab, Outcome, Timer, Truth, localizer, md_table,
-                                record, score, write_csv)
+from experiments.common import (
+    LOCALIZER_NOTE, RESULTS, Lab, Outcome, Timer, Truth, localizer, md_table,
+                                record, score, write_csv, script_main)
 
 DIST = 1.5
 TABLE1 = [((180, -90), (179, -88)), ((45, -45), (44, -47)), ((0, 0), (2, -2)), ((-45, 45), (-44, 44)),
@@ -146,11 +146,7 @@ Sweeps (errors in deg):
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--out", type=Path, default=RESULTS)
-    a = ap.parse_args()
-    print(run(a.quick, a.out).markdown)
+    script_main(run, __doc__)
 
 
 if __name__ == "__main__":

@@ -11,13 +11,13 @@ paper's method); ``pooled`` - per-window peaks pooled into a direction density (
 """
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import numpy as np
 
-from experiments.common import (LOCALIZER_NOTE, POOLED_NOTE, RESULTS, Lab, Outcome, Timer, Truth, localizer, match,
-                                md_table, pooled_localize, record, score, write_csv)
+from experiments.common import (
+    LOCALIZER_NOTE, POOLED_NOTE, RESULTS, Lab, Outcome, Timer, Truth, localizer, match,
+                                md_table, pooled_localize, record, score, write_csv, script_main)
 
 TRUTHS = [Truth(-135.0, 35.0, 2.0), Truth(90.0, 75.0, 2.0), Truth(145.0, 60.0, 2.0)]
 PAPER = [(-130.0, 32.0), (87.0, 73.0), (144.0, 60.0)]
@@ -129,11 +129,7 @@ Azimuth near the zenith (source 2 at el 75 deg) is poorly conditioned; the angul
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--out", type=Path, default=RESULTS)
-    a = ap.parse_args()
-    print(run(a.quick, a.out).markdown)
+    script_main(run, __doc__)
 
 
 if __name__ == "__main__":

@@ -15,13 +15,13 @@ the lab room; errors are great-circle angles between detected and true direction
 """
 from __future__ import annotations
 
-import argparse
 from pathlib import Path
 
 import numpy as np
 
-from experiments.common import (LOCALIZER_NOTE, POOLED_NOTE, RESULTS, Lab, Outcome, Timer, Truth, build_sim,
-                                localizer, match, md_table, pooled_localize, record, write_csv)
+from experiments.common import (
+    LOCALIZER_NOTE, POOLED_NOTE, RESULTS, Lab, Outcome, Timer, Truth, build_sim,
+                                localizer, match, md_table, pooled_localize, record, write_csv, script_main)
 
 LAB = Lab(array_height_m=1.5, noise_spectrum="hvac")
 FOUND_DEG = 10.0
@@ -206,11 +206,7 @@ SRP map summed over the recording; "pooled": {POOLED_NOTE}:
 
 
 def main() -> None:
-    ap = argparse.ArgumentParser(description=__doc__)
-    ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--out", type=Path, default=RESULTS)
-    a = ap.parse_args()
-    print(run(a.quick, a.out).markdown)
+    script_main(run, __doc__)
 
 
 if __name__ == "__main__":

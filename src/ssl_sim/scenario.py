@@ -454,6 +454,23 @@ _VICTIM_KEYS = {"position", "scene_victim", "sound", "speaker", "level_db_spl", 
                 "file", "name"}
 
 
+def _level(t: dict, w: str, where: str, default: float) -> float:
+    level = _get(t, "level_db_spl", float, where, f"{w}.level_db_spl", default)
+    if not 0 <= level <= 130:
+        raise ScenarioError(f"{where}{w}.level_db_spl: expected 0..130 dB SPL at 1 m, got {level}")
+    return level
+
+
+def _sound_file(t: dict, w: str, where: str, base_dir: Path, wanted: bool, how: str):
+    """``(file, samples, fs)`` of the WAV named by ``file`` when ``wanted`` (``how`` says which key asks)."""
+    file = _get(t, "file", str, where, f"{w}.file")
+    if not wanted:
+        return file, None, None
+    if file is None:
+        raise ScenarioError(f"{where}{w}.file: {how} needs file = 'path/to/sound.wav'")
+    return _load_wav(file, base_dir, f"{w}.file", where)
+
+
 def _victim(t: Any, i: int, base_dir: Path, where: str) -> VictimSpec:
     w = f"victims[{i}]"
     if not isinstance(t, dict):
@@ -471,9 +488,7 @@ def _victim(t: Any, i: int, base_dir: Path, where: str) -> VictimSpec:
     speaker = _get(t, "speaker", str, where, f"{w}.speaker")
     if speaker is not None and speaker not in SPEAKERS:
         raise ScenarioError(f"{where}{w}.speaker: expected one of {sorted(SPEAKERS)}, got {speaker!r}")
-    level = _get(t, "level_db_spl", float, where, f"{w}.level_db_spl", PAPER_LEVEL_DB_SPL)
-    if not 0 <= level <= 130:
-        raise ScenarioError(f"{where}{w}.level_db_spl: expected 0..130 dB SPL at 1 m, got {level}")
+    level = _level(t, w, where, PAPER_LEVEL_DB_SPL)
     buried = _get(t, "buried", float, where, f"{w}.buried")
     if buried is not None and not 0 <= buried <= 1:
         raise ScenarioError(f"{where}{w}.buried: expected a fraction in [0, 1], got {buried}")
@@ -483,13 +498,8 @@ def _victim(t: Any, i: int, base_dir: Path, where: str) -> VictimSpec:
         raise ScenarioError(f"{where}{w}.period_s: expected > 0.2 s, got {period}")
     if not 0 < p_event <= 1:
         raise ScenarioError(f"{where}{w}.p_event: expected a probability in (0, 1], got {p_event}")
-    file = _get(t, "file", str, where, f"{w}.file")
-    samples, ffs = None, None
-    if sound == "file":
-        if file is None:
-            raise ScenarioError(f"{where}{w}.file: sound = 'file' needs file = 'path/to/voice.wav'")
-        file, samples, ffs = _load_wav(file, base_dir, f"{w}.file", where)
-    elif file is not None:
+    file, samples, ffs = _sound_file(t, w, where, base_dir, sound == "file", "sound = 'file'")
+    if sound != "file" and file is not None:
         raise ScenarioError(f"{where}{w}.file: only used with sound = 'file' (sound is {sound!r})")
     return VictimSpec(pos, site, sound, speaker, level, buried, period, p_event, file,
                       _get(t, "name", str, where, f"{w}.name", ""), samples, ffs)
@@ -506,18 +516,11 @@ def _interferer(t: Any, i: int, base_dir: Path, where: str) -> InterfererSpec:
     if "position" not in t:
         raise ScenarioError(f"{where}{w}.position: missing (world m)")
     pos = _vec(t["position"], 3, f"{w}.position", where)
-    level = _get(t, "level_db_spl", float, where, f"{w}.level_db_spl", 72.0)
-    if not 0 <= level <= 130:
-        raise ScenarioError(f"{where}{w}.level_db_spl: expected 0..130 dB SPL at 1 m, got {level}")
+    level = _level(t, w, where, 72.0)
     speaker = _get(t, "speaker", str, where, f"{w}.speaker", "male")
     if speaker not in SPEAKERS:
         raise ScenarioError(f"{where}{w}.speaker: expected one of {sorted(SPEAKERS)}, got {speaker!r}")
-    file = _get(t, "file", str, where, f"{w}.file")
-    samples, ffs = None, None
-    if kind == "file":
-        if file is None:
-            raise ScenarioError(f"{where}{w}.file: kind = 'file' needs file = 'path/to/sound.wav'")
-        file, samples, ffs = _load_wav(file, base_dir, f"{w}.file", where)
+    file, samples, ffs = _sound_file(t, w, where, base_dir, kind == "file", "kind = 'file'")
     return InterfererSpec(kind, pos, level, speaker, file, _get(t, "name", str, where, f"{w}.name", ""), samples, ffs)
 
 
