@@ -315,13 +315,21 @@ def test_firmware_parser_agrees_with_python_reference_on_random_streams(board, d
     ref = P.FrameParser(max_payload=P.MCU_MAX_PAYLOAD)
     frames = ref.feed(bytes(stream))
     assert ref.pending == 0
-    t0 = drive.telemetry()
-    drive._ser.write(bytes(stream))
-    drive._ser.flush()
-    # line time + replies + inter-byte timeout, with margin for a simulated board lagging under CPU load
-    time.sleep(len(stream) * 11 / 117647 + 1.5)
-    drive.stop()
-    t1 = drive.telemetry()
+    # The comparison presumes a gap-free line. A pause of more than the 5 ms inter-byte timeout
+    # (the host or the pty stalling under load; seen about once in two full-file runs on a fresh
+    # clone) shows as an MCU timeout that the untimed reference cannot have: such an attempt says
+    # nothing about the parser, so it is repeated (at most 3 attempts), never relaxed.
+    assert ref.timeouts == 0
+    for _attempt in range(3):
+        t0 = drive.telemetry()
+        drive._ser.write(bytes(stream))
+        drive._ser.flush()
+        # line time + replies + inter-byte timeout, with margin for a simulated board lagging under CPU load
+        time.sleep(len(stream) * 11 / 117647 + 1.5)
+        drive.stop()
+        t1 = drive.telemetry()
+        if (t1.timeouts - t0.timeouts) % 65536 == 0:
+            break
     assert t1.rx_overflows == t0.rx_overflows           # the MCU never stalls its receive path
     for field, want in [("crc_errors", ref.crc_errors), ("length_errors", ref.length_errors),
                         ("dropped_bytes", ref.dropped_bytes), ("timeouts", ref.timeouts),
