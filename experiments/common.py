@@ -30,7 +30,7 @@ from scipy.optimize import linear_sum_assignment  # noqa: E402
 from ssl_core.grid import angular_distance, direction_from_angles  # noqa: E402
 from ssl_core.localizer import Localizer, LocalizerConfig  # noqa: E402
 from ssl_sim.acoustics import (AcousticConfig, AcousticSimulator, AmbientNoise, ArrayMount,  # noqa: E402
-                               RobotPose, SoundSource, continuous_voice, point_at)
+                               RobotPose, SoundSource, noise_source, point_at, victim_voice)
 from ssl_sim.world import Room, World  # noqa: E402
 
 RESULTS = Path(__file__).resolve().parent / "results"
@@ -87,15 +87,22 @@ class Truth:
 
 
 def build_sim(lab: Lab, truths: list[Truth], seed: int, noise_db_spl: float | None = None,
-              rt60_s: float | None = None, ambient: bool = True) -> AcousticSimulator:
-    """The simulator of one trial: the sources of ``truths`` (each a different seeded voice) in the lab."""
+              rt60_s: float | None = None, ambient: bool = True, p_event: float = 1.0,
+              pump: Truth | None = None) -> AcousticSimulator:
+    """The simulator of one trial: the sources of ``truths`` (each a different seeded voice calling in
+    1.2 s slots, each slot taken with probability ``p_event``; 1 = near-continuous) in the lab, plus an
+    optional steady ``pump`` (motor hum and flow noise) placed like a truth."""
     world = World(room=Room(lab.room_size), name="lab")
     centre = lab.centre
     sources = []
     for k, t in enumerate(truths):
         pos = point_at(centre, np.deg2rad(t.azimuth_deg), np.deg2rad(t.elevation_deg), t.distance_m)
-        voice = continuous_voice(SPEAKERS[(seed + k) % len(SPEAKERS)], seed=1000 * seed + k, stream=k)
+        voice = victim_voice("calls", SPEAKERS[(seed + k) % len(SPEAKERS)], seed=1000 * seed + k, period_s=1.2,
+                             p_event=p_event, stream=k)
         sources.append(SoundSource(tuple(pos), voice, t.level_db_spl or lab.level_db_spl, name=f"src{k}"))
+    if pump is not None:
+        pos = point_at(centre, np.deg2rad(pump.azimuth_deg), np.deg2rad(pump.elevation_deg), pump.distance_m)
+        sources.append(noise_source(pos, "pump", pump.level_db_spl or lab.level_db_spl, seed=seed))
     level = lab.noise_db_spl if noise_db_spl is None else noise_db_spl
     cfg = AcousticConfig(rt60_s=lab.rt60_s if rt60_s is None else rt60_s, ism_order=lab.ism_order, seed=seed,
                          ambient=AmbientNoise(level, lab.noise_spectrum) if ambient else None)
@@ -109,6 +116,14 @@ def record(lab: Lab, truths: list[Truth], seed: int, noise_db_spl: float | None 
     return sim.listen_pose(lab.pose, lab.duration_s, t0=0.0, mount=lab.mount)
 
 
+def with_sensor_noise(x: np.ndarray, snr_db: float, seed: int) -> np.ndarray:
+    """``x`` (int16 or float) as float plus independent white noise per channel at ``snr_db`` below its
+    mean square (the whole recording's, pauses included)."""
+    xf = x.astype(np.float64) / (32768.0 if x.dtype == np.int16 else 1.0)
+    rms = np.sqrt(np.mean(xf**2))
+    return xf + np.random.default_rng(seed).standard_normal(xf.shape) * rms * 10 ** (-snr_db / 20)
+
+
 _LOCALIZERS: dict[int, Localizer] = {}
 
 
@@ -117,66 +132,32 @@ LOCALIZER_NOTE = ("ssl_core SRP-PHAT, far-field grid, 0.5 deg fine resolution, b
 
 
 def localizer(n_sources: int = 1) -> Localizer:
-    """The project's SRP-PHAT localizer as the paper used it: the ``n_sources`` strongest peaks of a
-    0.5 deg grid (fine enough that grid quantisation does not hide the acoustic errors), no detection
-    threshold (the number of sources is known in these experiments)."""
+    """The project's SRP-PHAT localizer as the paper used it (call :meth:`Localizer.locate_summed`): the
+    ``n_sources`` strongest peaks of a 0.5 deg grid (fine enough that grid quantisation does not hide the
+    acoustic errors), no detection threshold (the number of sources is known in these experiments)."""
     loc = _LOCALIZERS.get(n_sources)
     if loc is None:
-        cfg = LocalizerConfig(n_sources=n_sources, resolution_deg=0.5, min_power=0.0, rel_threshold=0.0)
+        cfg = LocalizerConfig(n_sources=n_sources, resolution_deg=0.5, min_power=0.0, rel_threshold=0.0,
+                              min_significance=0.0)
         loc = _LOCALIZERS[n_sources] = Localizer("cube8", cfg)
     return loc
 
 
-POOLED_NOTE = ("per-window peaks (64 ms windows, the 2 strongest each) pooled over the recording into a direction "
-               "density (von Mises-Fisher kernel, 4 deg), its k highest modes at least 15 deg apart")
+POOLED_NOTE = ("the product's whole-recording answer (ssl_core Localizer.locate): per-window (128 ms) peaks that "
+               "pass the significance test, pooled into a direction density (ssl_core.pooling, von Mises-Fisher "
+               "kernel 4 deg), its k highest modes at least 15 deg apart")
 
 
-@dataclass(frozen=True)
-class PooledDetection:
-    """A direction found by pooling per-window detections (array frame, rad)."""
-
-    azimuth: float
-    elevation: float
-    direction: np.ndarray
-    power: float
-
-
-_POOL_GRID: list[np.ndarray] = []
-
-
-def pooled_localize(x: np.ndarray, k: int, kappa_deg: float = 4.0, sep_deg: float = 15.0) -> list[PooledDetection]:
-    """Locate ``k`` simultaneous talkers by pooling short-window SRP-PHAT peaks over the recording.
-
-    Talkers rarely dominate the same short window (speech is sparse in time-frequency), so
-    per-window peaks fall on each talker in turn; the modes of their power-weighted direction
-    density separate talkers that merge in the SRP map summed over the whole recording."""
-    from ssl_core.grid import fibonacci_directions
-
-    if not _POOL_GRID:
-        _POOL_GRID.append(fibonacci_directions(20000))
-    grid = _POOL_GRID[0]
+def pooled_localize(x: np.ndarray, k: int):
+    """Locate ``k`` simultaneous talkers with the product's path, :meth:`Localizer.locate` (pooled
+    short-window peaks; talkers rarely dominate the same short window, so the windows' peaks fall on
+    each talker in turn and the density's modes separate talkers the summed map merges)."""
     key = -k
     loc = _LOCALIZERS.get(key)
     if loc is None:
-        cfg = LocalizerConfig(n_sources=2, resolution_deg=1.0, min_power=0.0, rel_threshold=0.5, window_frames=4)
+        cfg = LocalizerConfig(n_sources=k, min_separation_deg=15.0, coarse_resolution_deg=5.0)
         loc = _LOCALIZERS[key] = Localizer("cube8", cfg)
-    dets = [d for r in loc.process_all(x) for d in r.detections]
-    if not dets:
-        return []
-    dirs = np.array([d.direction for d in dets])
-    w = np.array([d.power for d in dets])
-    kappa = 1.0 / np.deg2rad(kappa_deg) ** 2
-    dens = np.exp(kappa * (grid @ dirs.T - 1.0)) @ w
-    out = []
-    for _ in range(k):
-        i = int(np.argmax(dens))
-        if dens[i] <= 0:
-            break
-        u = grid[i]
-        out.append(PooledDetection(float(np.arctan2(u[1], u[0])), float(np.arcsin(np.clip(u[2], -1, 1))), u.copy(),
-                                   float(dens[i])))
-        dens = np.where(grid @ u > np.cos(np.deg2rad(sep_deg)), 0.0, dens)
-    return out
+    return loc.locate(x).detections
 
 
 def wrap_deg(a) -> np.ndarray:
@@ -249,7 +230,8 @@ class Timer:
 
 
 __all__ = ["Lab", "Truth", "build_sim", "record", "localizer", "match", "score", "wrap_deg", "write_csv", "read_csv",
-           "md_table", "Outcome", "Timer", "RESULTS", "LOCALIZER_NOTE", "POOLED_NOTE", "pooled_localize"]
+           "md_table", "Outcome", "Timer", "RESULTS", "LOCALIZER_NOTE", "POOLED_NOTE", "pooled_localize",
+           "with_sensor_noise"]
 
 
 def script_main(run, doc: str | None) -> None:

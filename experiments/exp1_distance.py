@@ -29,7 +29,7 @@ def run(quick: bool = False, out_dir: Path = RESULTS, seed0: int = 0) -> Outcome
         truth = Truth(AZ, EL, float(d))
         for k in range(trials):
             seed = seed0 + 100 * k + int(round(d * 100))
-            res = localizer(1).locate(record(lab, [truth], seed))
+            res = localizer(1).locate_summed(record(lab, [truth], seed))
             det = res.detections[0] if res.detections else None
             rows.append({"setup": setup, "distance_m": float(d), "trial": k, "seed": seed, **score(det, truth)})
 

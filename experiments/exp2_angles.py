@@ -54,7 +54,7 @@ def run(quick: bool = False, out_dir: Path = RESULTS, seed0: int = 0) -> Outcome
             truth = Truth(float(az), float(el), DIST)
             for k in range(trials):
                 seed = seed0 + 1000 * k + 17 * pi + 5
-                res = localizer(1).locate(record(LAB, [truth], seed))
+                res = localizer(1).locate_summed(record(LAB, [truth], seed))
                 det = res.detections[0] if res.detections else None
                 rows.append({"group": group, "az_true": float(az), "el_true": float(el), "trial": k, "seed": seed,
                              **score(det, truth)})

@@ -5,8 +5,8 @@ different synthetic voices, 62.5 dB SPL each at 1 m). The SRP-PHAT power over th
 sphere is drawn as a heat map and a surface with the three strongest peaks marked; the
 measured directions are set beside the true ones and the paper's. Two estimates per trial:
 ``map`` - the three strongest peaks of the SRP map summed over the whole recording (the
-paper's method); ``pooled`` - per-window peaks pooled into a direction density (see
-``experiments.common.pooled_localize``). The array stands at
+paper's method); ``pooled`` - the product's whole-recording answer, per-window peaks pooled into a direction density (
+``ssl_core.localizer.Localizer.locate``). The array stands at
 1.2 m (the 75 deg source is then 3.13 m high, under the 3.5 m ceiling).
 """
 from __future__ import annotations
@@ -54,7 +54,7 @@ def run(quick: bool = False, out_dir: Path = RESULTS, seed0: int = 0) -> Outcome
             pooled = pooled_localize(x, 3)
             if first_x is None:
                 first_x, first_pooled = x, pooled
-            for method, dets in (("map", loc.locate(x).detections), ("pooled", pooled)):
+            for method, dets in (("map", loc.locate_summed(x).detections), ("pooled", pooled)):
                 for i, (t, det, _) in enumerate(match(dets, TRUTHS)):
                     rows.append({"method": method, "trial": k, "seed": seed, "source": i + 1, "az_true": t.azimuth_deg,
                                  "el_true": t.elevation_deg, **score(det, t)})
@@ -64,7 +64,7 @@ def run(quick: bool = False, out_dir: Path = RESULTS, seed0: int = 0) -> Outcome
     import matplotlib.pyplot as plt
 
     az, el, img = srp_map_image(loc, first_x)
-    res0 = loc.locate(first_x)
+    res0 = loc.locate_summed(first_x)
     fig = plt.figure(figsize=(14, 5.5))
     ax = fig.add_subplot(1, 2, 1)
     im = ax.pcolormesh(az, el, img, shading="auto", cmap="viridis")

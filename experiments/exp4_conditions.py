@@ -76,7 +76,7 @@ def trial(truths: list[Truth], seed: int, rt60_s: float, noise_db: float | None 
     """Errors of one trial: the summed-map estimate; with ``pooled`` the pooled per-window one (one row per
     talker); with ``windows`` the per-window view (one row: median window error, fraction of windows found)."""
     x = record(lab, truths, seed, noise_db_spl=noise_db, rt60_s=rt60_s)
-    methods = [("map", localizer(len(truths)).locate(x).detections)]
+    methods = [("map", localizer(len(truths)).locate_summed(x).detections)]
     if pooled:
         methods.append(("pooled", pooled_localize(x, len(truths))))
     rows = [{"method": m, "ang_err": e, "found": float(e < FOUND_DEG)}

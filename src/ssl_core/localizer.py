@@ -272,21 +272,29 @@ class Localizer:
         cfg = self.config
         stream = self._new_stream()
         pool = DirectionPool(self.fine_grid.directions)
-        gcc_sum, w_sum, w_sq, frames, ms_sum, t_end = 0.0, 0.0, 0.0, 0, 0.0, 0.0
+        acc = {"gcc": 0.0, "w": 0.0, "w_sq": 0.0, "frames": 0, "ms": 0.0, "t": 0.0}
+
+        def take(r: LocalizationResult) -> None:
+            pool.add(r.detections)
+            acc["t"] = r.time
+            acc["frames"] += r.active_frames
+            acc["ms"] += r.active_frames * 10 ** (r.level_db / 10)
+            if r.weight_sum > 0:
+                acc["gcc"] = acc["gcc"] + r.weight_sum * r.gcc
+                acc["w"] += r.weight_sum
+                acc["w_sq"] += r.weight_sum**2 / r.n_eff
+
         with _one_blas_thread():
             for block in blocks:
                 for r in self._process(self._check(block, fs), stream):
-                    t_end = r.time
-                    pool.add(r.detections)
-                    if r.active_frames:
-                        gcc_sum = gcc_sum + r.weight_sum * r.gcc
-                        w_sum += r.weight_sum
-                        w_sq += r.weight_sum**2 / r.n_eff
-                        frames += r.active_frames
-                        ms_sum += r.active_frames * 10 ** (r.level_db / 10)
+                    take(r)
+            if stream.ms.size:  # the frames after the last full window form a short last one
+                t_end = ((stream.frames_done + stream.ms.size - 1) * cfg.hop + cfg.frame_size) / cfg.fs
+                take(self._window_result(stream.spec, stream.ms, t_end, stream.floor))
+            frames, w_sum, w_sq, ms_sum, t_end = acc["frames"], acc["w"], acc["w_sq"], acc["ms"], acc["t"]
             if frames == 0 or w_sum <= 0:
                 return LocalizationResult(t_end, [], np.zeros(self.coarse_grid.n_points), frames)
-            gcc, n_eff = gcc_sum / w_sum, w_sum**2 / w_sq
+            gcc, n_eff = acc["gcc"] / w_sum, w_sum**2 / w_sq
             detections = pool.modes(cfg.n_sources, np.deg2rad(cfg.min_separation_deg), min_windows=2)
             srp_map, peaks = self._search(gcc, n_eff)
         cos_sep = np.cos(np.deg2rad(cfg.min_separation_deg))
@@ -304,12 +312,24 @@ class Localizer:
         """SRP power on the whole fine grid for a GCC (pairs, lags) - for plots, not for the hot path."""
         return self._fine.power(result_or_gcc)
 
+    def locate_summed(self, recording, fs: int | None = None) -> LocalizationResult:
+        """The paper's whole-recording method: one SRP map of the GCC summed over all the recording's
+        non-silent frames, and its peaks (same significance test). Sharper than :meth:`locate` for one
+        steady source; blurs moving or intermittent ones and merges talkers of unequal level."""
+        x = self._check(recording, fs)
+        if x.shape[1] < self.config.frame_size:
+            raise ValueError(
+                f"recording too short: {x.shape[1]} samples, need at least frame_size={self.config.frame_size}"
+            )
+        with _one_blas_thread():
+            spec, ms = self._analyse(x)
+            t_end = ((ms.size - 1) * self.config.hop + self.config.frame_size) / self.config.fs
+            return self._window_result(spec, ms, t_end, self._new_stream().floor)
+
     def window_gcc(self, recording, fs: int | None = None) -> np.ndarray:
         """Window-summed GCC (pairs, lags) of a recording; use with :meth:`srp_fine` for full-resolution maps."""
-        spec, ms = self._analyse(self._check(recording, fs))
-        active = self._active(ms)
-        weights = self._bin_weights(spec, self._new_stream().floor)
-        return self._gcc(spec[:, active], None if weights is None else weights[active])[0]
+        r = self.locate_summed(recording, fs)
+        return r.gcc if r.gcc is not None else np.zeros((len(self.pairs), self._lag_axis.size), np.float32)
 
     # ------------------------------------------------------------------ internals
     def _active(self, ms: np.ndarray) -> np.ndarray:
@@ -348,9 +368,10 @@ class Localizer:
             w_sum = w_sq = float(spec.shape[1] * n_bins)
         else:
             w_sum, w_sq = float(weights.sum()), float(np.square(weights).sum())
+        if w_sum <= 0:  # every bin suppressed: no evidence at all
+            return np.zeros((len(self.pairs), self._lag_axis.size), np.float32), 0.0, 0.0
         cross = summed_phat_cross_spectra(spec, self.pairs, weights)
-        n_eff = w_sum**2 / w_sq if w_sq > 0 else 0.0
-        return self._lag_steering(cross * (n_bins / max(w_sum, np.finfo(float).tiny))), w_sum, n_eff
+        return self._lag_steering(cross * (n_bins / w_sum)), w_sum, w_sum**2 / w_sq
 
     def _bin_weights(self, spec: np.ndarray, floor: NoiseFloor | None) -> np.ndarray | None:
         """Noise-suppression weights (frames, bins), updating ``floor`` chunk by chunk as streaming would."""

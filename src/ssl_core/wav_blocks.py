@@ -1,0 +1,107 @@
+"""Read a multichannel WAV file block by block, in bounded memory (stdlib + numpy).
+
+``scipy.io.wavfile.read`` loads the whole file (2.3 GB for 10 min of 8-channel float64); a
+memory map keeps every touched page resident. This reader parses the RIFF header itself and
+reads one block of frames at a time with ``numpy.fromfile``: PCM 8/16/24/32-bit and IEEE float
+32/64-bit, plain or WAVE_FORMAT_EXTENSIBLE.
+"""
+from __future__ import annotations
+
+import struct
+from collections.abc import Iterator
+from dataclasses import dataclass
+from pathlib import Path
+
+import numpy as np
+
+_PCM, _FLOAT, _EXTENSIBLE = 1, 3, 0xFFFE
+
+
+@dataclass(frozen=True)
+class WavInfo:
+    path: str
+    fs: int               # Hz
+    channels: int
+    bits: int
+    is_float: bool
+    data_offset: int      # bytes from the file start
+    n_frames: int         # samples per channel
+
+    @property
+    def duration_s(self) -> float:
+        return self.n_frames / self.fs
+
+
+def wav_info(path: str | Path) -> WavInfo:
+    """Header of a WAV file. Raises ``ValueError`` naming the file for anything it cannot read
+    (``IsADirectoryError``/``PermissionError``/``FileNotFoundError`` pass through as ``OSError``)."""
+    path = str(path)
+    with open(path, "rb") as f:
+        head = f.read(12)
+        if len(head) < 12 or head[:4] not in (b"RIFF", b"RF64") or head[8:12] != b"WAVE":
+            raise ValueError(f"{path}: not a WAV file (no RIFF/WAVE header)")
+        fmt = None
+        while True:
+            chunk = f.read(8)
+            if len(chunk) < 8:
+                raise ValueError(f"{path}: WAV file has no data chunk" if fmt else f"{path}: WAV file has no fmt chunk")
+            cid, size = chunk[:4], struct.unpack("<I", chunk[4:])[0]
+            if cid == b"fmt ":
+                body = f.read(size)
+                if len(body) < 16:
+                    raise ValueError(f"{path}: truncated WAV fmt chunk")
+                tag, channels, fs, _, _, bits = struct.unpack("<HHIIHH", body[:16])
+                if tag == _EXTENSIBLE and len(body) >= 26:
+                    tag = struct.unpack("<H", body[24:26])[0]  # the sub-format GUID starts with the tag
+                if tag not in (_PCM, _FLOAT) or (tag == _PCM and bits not in (8, 16, 24, 32)) \
+                        or (tag == _FLOAT and bits not in (32, 64)):
+                    raise ValueError(f"{path}: unsupported WAV encoding (format tag {tag}, {bits} bits); "
+                                     "expected PCM 8/16/24/32-bit or float 32/64-bit")
+                if channels < 1 or fs < 1:
+                    raise ValueError(f"{path}: WAV header has {channels} channels at {fs} Hz")
+                fmt = (fs, channels, bits, tag == _FLOAT)
+                f.seek(size % 2, 1)
+            elif cid == b"data":
+                if fmt is None:
+                    raise ValueError(f"{path}: WAV data chunk before the fmt chunk")
+                fs, channels, bits, is_float = fmt
+                offset = f.tell()
+                f.seek(0, 2)
+                available = f.tell() - offset
+                n = min(size, available) // (channels * bits // 8)  # a truncated file keeps its whole frames
+                return WavInfo(path, fs, channels, bits, is_float, offset, n)
+            else:
+                f.seek(size + size % 2, 1)
+
+
+def read_blocks(info: WavInfo, block_frames: int) -> Iterator[np.ndarray]:
+    """Consecutive blocks (channels, <= block_frames) as float32 in [-1, 1) (int) or as stored (float)."""
+    if block_frames < 1:
+        raise ValueError(f"block_frames: expected >= 1, got {block_frames}")
+    width = info.bits // 8
+    dtype = {(False, 8): np.uint8, (False, 16): "<i2", (False, 32): "<i4", (True, 32): "<f4", (True, 64): "<f8",
+             (False, 24): np.uint8}[(info.is_float, info.bits)]
+    with open(info.path, "rb") as f:
+        f.seek(info.data_offset)
+        left = info.n_frames
+        while left > 0:
+            n = min(block_frames, left)
+            count = n * info.channels * (3 if info.bits == 24 else 1)
+            raw = np.fromfile(f, dtype=dtype, count=count)
+            n = raw.size // (info.channels * (3 if info.bits == 24 else 1))
+            if n == 0:
+                return
+            left -= n
+            yield _to_float(raw[: n * info.channels * (width if info.bits == 24 else 1)], info).reshape(n, info.channels).T
+
+
+def _to_float(raw: np.ndarray, info: WavInfo) -> np.ndarray:
+    if info.is_float:
+        return raw.astype(np.float32)
+    if info.bits == 8:  # 8-bit WAV is unsigned
+        return (raw.astype(np.float32) - 128.0) / 128.0
+    if info.bits == 24:
+        b = raw.reshape(-1, 3).astype(np.int32)
+        v = b[:, 0] | (b[:, 1] << 8) | (b[:, 2] << 16)
+        return (np.where(v >= 1 << 23, v - (1 << 24), v).astype(np.float32)) / np.float32(1 << 23)
+    return raw.astype(np.float32) / np.float32(2.0 ** (info.bits - 1))
