@@ -32,3 +32,59 @@ def test_cli_wrong_channel_count(tmp_path, capsys):
     x = np.zeros((4, FS))
     assert main([_write(tmp_path, x)]) == 2
     assert "4 channels" in capsys.readouterr().err
+
+
+def test_cli_bad_inputs_are_one_line_errors_with_exit_code_2(tmp_path, capsys):
+    import os
+
+    x = 0.2 * plane_wave(cube8().positions, direction_from_angles(0.3, 0.1),
+                         np.random.default_rng(1).standard_normal(FS), FS)
+    good = _write(tmp_path, x)
+    unreadable = tmp_path / "locked.wav"
+    unreadable.write_bytes(open(good, "rb").read())
+    os.chmod(unreadable, 0)
+    not_wav = tmp_path / "notes.wav"
+    not_wav.write_text("hello")
+    cases = [([str(tmp_path)], "is a directory"), ([str(tmp_path / "missing.wav")], "no such file"),
+             ([str(not_wav)], "not a WAV"), ([good, "--array", str(tmp_path)], "--array"),
+             ([good, "--sources", "0"], "--sources"), ([good, "--resolution", "0.05"], "MB")]
+    if os.access(unreadable, os.R_OK):  # running as root: permissions do not apply
+        cases = [c for c in cases if "locked" not in c[0][0]]
+    else:
+        cases.append(([str(unreadable)], "permission denied"))
+    for argv, needle in cases:
+        assert main(argv) == 2, argv
+        err = capsys.readouterr().err.strip()
+        assert err.count("\n") == 0 and err.startswith("ssl-locate: ") and needle in err, (argv, err)
+        if argv[0] != good:
+            assert argv[0] in err  # names the file
+
+
+def test_cli_no_source_says_so_and_fails_only_when_asked(tmp_path, capsys):
+    path = _write(tmp_path, np.zeros((8, FS)))
+    assert main([path]) == 0
+    assert "no source" in capsys.readouterr().err
+    assert main([path, "--require-source"]) == 1
+    assert "no source" in capsys.readouterr().err
+
+
+def test_cli_reads_24_bit_and_float_wav_in_blocks(tmp_path, capsys):
+    from ssl_core.wav_blocks import read_blocks, wav_info
+
+    u = direction_from_angles(np.deg2rad(120), np.deg2rad(-10))
+    x = 0.2 * plane_wave(cube8().positions, u, np.random.default_rng(2).standard_normal(2 * FS), FS)
+    f32 = tmp_path / "f32.wav"
+    wavfile.write(f32, FS, x.T.astype(np.float32))
+    pcm24 = tmp_path / "pcm24.wav"  # scipy cannot write 24-bit: pack the bytes by hand
+    v = np.round(x.T * (2**23 - 1)).astype(np.int32).reshape(-1)
+    raw = np.stack([v & 0xFF, (v >> 8) & 0xFF, (v >> 16) & 0xFF], axis=1).astype(np.uint8).tobytes()
+    import struct
+    fmt = struct.pack("<HHIIHH", 1, 8, FS, FS * 8 * 3, 8 * 3, 24)
+    pcm24.write_bytes(b"RIFF" + struct.pack("<I", 4 + 8 + len(fmt) + 8 + len(raw)) + b"WAVE" + b"fmt "
+                      + struct.pack("<I", len(fmt)) + fmt + b"data" + struct.pack("<I", len(raw)) + raw)
+    for path in (f32, pcm24):
+        got = np.concatenate(list(read_blocks(wav_info(path), 5000)), axis=1)
+        assert got.shape == x.shape and np.max(np.abs(got - x)) < 1e-6
+        assert main([str(path), "--json"]) == 0
+        d = json.loads(capsys.readouterr().out)["windows"][0]["detections"][0]
+        assert abs(d["azimuth_deg"] - 120) < 1.5 and abs(d["elevation_deg"] + 10) < 1.5

@@ -31,14 +31,14 @@ from scipy.spatial import cKDTree
 from ssl_core.detection import Detection
 from ssl_core.gcc_phat import LagSteering, band_bins, frame_spectra, summed_phat_cross_spectra
 from ssl_core.geometry import ArrayGeometry, get_array
-from ssl_core.grid import SphericalGrid, azimuth_elevation, make_grid
+from ssl_core.grid import SphericalGrid, azimuth_elevation, make_grid, n_points_for_spacing
 from ssl_core.noise import NoiseFloor
 from ssl_core.peaks import local_maxima, neighbour_table
 from ssl_core.pooling import DirectionPool
 from ssl_core.srp import SOUND_SPEED, SteeringTable, tdoa_table
 
 _FULL_SCALE_SINE_MS = 0.5  # mean square of a full-scale sine: 0 dBFS
-_TABLE_BYTES_PER_POINT_PAIR = 40  # fine steering tables + build temporaries, measured (tracemalloc) at 0.5-1.5 deg
+_TABLE_BYTES_PER_POINT_PAIR = 48  # peak bytes of building the tables, per fine point and pair: tracemalloc, 45-48 at 0.5-1.5 deg
 
 
 def _one_blas_thread():
@@ -159,14 +159,16 @@ class Localizer:
 
         el_min, el_max = np.deg2rad(cfg.el_min_deg), np.deg2rad(cfg.el_max_deg)
         coarse_sp, fine_sp = np.deg2rad(cfg.coarse_resolution_deg), np.deg2rad(cfg.resolution_deg)
-        self.coarse_grid: SphericalGrid = make_grid(coarse_sp, el_min, el_max, cfg.radius_m)
-        self.fine_grid: SphericalGrid = make_grid(fine_sp, el_min, el_max, cfg.radius_m)
-        need_mb = self.fine_grid.n_points * len(self.pairs) * _TABLE_BYTES_PER_POINT_PAIR / 1e6
+        # Check the memory before building anything: the grid's share of the sphere times its density.
+        n_fine = n_points_for_spacing(fine_sp) * (np.sin(el_max) - np.sin(el_min)) / 2
+        need_mb = n_fine * len(self.pairs) * _TABLE_BYTES_PER_POINT_PAIR / 1e6
         if need_mb > cfg.max_table_mb:
             raise ValueError(
-                f"LocalizerConfig.resolution_deg={cfg.resolution_deg:g}: the fine grid has {self.fine_grid.n_points} "
+                f"LocalizerConfig.resolution_deg={cfg.resolution_deg:g}: the fine grid has about {n_fine:.0f} "
                 f"points, its steering tables need about {need_mb:.0f} MB, more than max_table_mb="
                 f"{cfg.max_table_mb:g}; use a coarser resolution (memory grows as 1/resolution^2) or raise max_table_mb")
+        self.coarse_grid: SphericalGrid = make_grid(coarse_sp, el_min, el_max, cfg.radius_m)
+        self.fine_grid: SphericalGrid = make_grid(fine_sp, el_min, el_max, cfg.radius_m)
 
         tdoa_c = tdoa_table(self.geometry, self.coarse_grid, cfg.sound_speed)
         tdoa_f = tdoa_table(self.geometry, self.fine_grid, cfg.sound_speed)
