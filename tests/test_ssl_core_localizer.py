@@ -84,7 +84,7 @@ def _assert_three_found(truths, signals, noise: float = 0.0) -> None:
     for (az, el), s in zip(truths, signals):
         x += 0.05 * plane_wave(g.positions, direction_from_angles(np.deg2rad(az), np.deg2rad(el)), s, FS)
     x += noise * np.random.default_rng(5).standard_normal(x.shape)
-    loc = Localizer(g, LocalizerConfig(n_sources=3, min_separation_deg=20.0, rel_threshold=0.2, min_power=0.05))
+    loc = Localizer(g, LocalizerConfig(n_sources=3, min_separation_deg=20.0, rel_threshold=0.2))
     res = loc.locate(x)
     assert len(res.detections) == 3
     for az, el in truths:
@@ -122,6 +122,7 @@ def test_streaming_equals_batch(loc):
             assert da.azimuth == pytest.approx(db.azimuth, abs=1e-9)
             assert da.elevation == pytest.approx(db.elevation, abs=1e-9)
             assert da.power == pytest.approx(db.power, rel=1e-4)
+            assert da.significance == pytest.approx(db.significance, rel=1e-3)
     # window end times step by window_frames * hop / fs
     assert np.allclose(np.diff([r.time for r in batch]), 8 * 256 / FS)
 
@@ -173,6 +174,9 @@ def test_sample_rate_mismatch(loc):
         (dict(resolution_deg=6.0), "resolution_deg"),
         (dict(band_hz=(3000.0, 300.0)), "band_hz"),
         (dict(el_min_deg=50.0, el_max_deg=10.0), "elevation"),
+        (dict(min_significance=-1.0), "min_significance"),
+        (dict(min_power=1.5), "min_power"),
+        (dict(resolution_deg=0.1), "max_table_mb"),  # ~5.5 GB of tables: refused before anything is built
     ],
 )
 def test_bad_config_is_named(kwargs, field):
@@ -203,7 +207,7 @@ def test_noise_suppression_reveals_a_voice_under_steady_louder_noise():
     x += 1e-4 * rng.standard_normal(x.shape)
 
     def voice_first_windows(suppress: bool) -> int:
-        loc = Localizer(g, LocalizerConfig(noise_suppression=suppress, min_power=0.03))
+        loc = Localizer(g, LocalizerConfig(noise_suppression=suppress))
         return sum(1 for r in loc.process_all(x) if r.detections and deg_err(r.detections[0], u_voice) < 3)
 
     plain, suppressed = voice_first_windows(False), voice_first_windows(True)
@@ -211,7 +215,7 @@ def test_noise_suppression_reveals_a_voice_under_steady_louder_noise():
     assert plain <= 2  # plain SRP-PHAT: the steady pump wins nearly every window
     assert suppressed >= 0.35 * n_windows  # the voice talks in half of the windows
     # and streaming still equals batch with the stateful noise floor
-    loc = Localizer(g, LocalizerConfig(noise_suppression=True, min_power=0.03))
+    loc = Localizer(g, LocalizerConfig(noise_suppression=True))
     batch = [r.detections[0].azimuth if r.detections else None for r in loc.process_all(x)]
     loc.reset()
     stream = []
