@@ -267,8 +267,10 @@ class Localizer:
 
         The windows' detections are pooled into a direction density (:class:`~ssl_core.pooling.DirectionPool`);
         each mode seen in at least 2 windows is a source (two independent false alarms at the same place
-        are far rarer than the 0.3 % per window). Short recordings or weak sources that no two windows
-        agree on fall back on the SRP of the GCC summed over all windows, under the same significance test.
+        are far rarer than the 0.3 % per window). When no two windows agree (a short recording, a weak
+        source), the answer is the peaks of the SRP of the GCC summed over all windows, under the same
+        significance test. The summed map is not used to add sources beside pooled ones: its secondary
+        peaks include strong reflections, which pass the test over a long recording.
         Works on its own state: the streaming state (:meth:`process`) is left alone.
         """
         cfg = self.config
@@ -299,10 +301,9 @@ class Localizer:
             gcc, n_eff = acc["gcc"] / w_sum, w_sum**2 / w_sq
             detections = pool.modes(cfg.n_sources, np.deg2rad(cfg.min_separation_deg), min_windows=2)
             srp_map, peaks = self._search(gcc, n_eff)
-        cos_sep = np.cos(np.deg2rad(cfg.min_separation_deg))
-        for power, f, z in peaks:  # summed-map sources that no two windows agreed on
-            u = self.fine_grid.directions[f]
-            if len(detections) < cfg.n_sources and all(float(d.direction @ u) < cos_sep for d in detections):
+        if not detections:  # no two windows agreed: the summed map's peaks, if significant
+            for power, f, z in peaks:
+                u = self.fine_grid.directions[f]
                 az, el = azimuth_elevation(u)
                 # the beam level needs the spectra, gone by now: the recording's band level bounds it from above
                 detections.append(Detection(float(az), float(el), u.copy(), power,

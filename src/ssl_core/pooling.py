@@ -60,7 +60,12 @@ class DirectionPool:
         each made of detections from at least ``min_windows`` windows.
 
         A source's direction is the power-weighted mean of the detections within ``member_deg`` of
-        its density mode; power, level (dB, of the mean linear level) and significance are means."""
+        its density mode; power and significance are means over those detections. Its level is the
+        beam power toward it averaged over *all* the pooled windows (a window without it counts as
+        silent), so levels compare sources of one recording by the energy each delivered: a reflection
+        or a second source that shows only in the loudest windows does not outrank the source that
+        sounds throughout (measured: a floor reflection 0.9 m from a caller, 2 of 7 windows, -53.3 dB
+        against the caller's -50.9 dB; averaged over its own windows it came out 2 dB louder)."""
         occ = np.flatnonzero(self._count)
         if occ.size == 0:
             return []
@@ -82,5 +87,6 @@ class DirectionPool:
                 continue
             az, el = azimuth_elevation(centre)
             out.append(Detection(float(az), float(el), centre, float(self._power[near].sum() / n),
-                                 float(10 * np.log10(self._level[near].sum() / n)), float(self._z[near].sum() / n)))
+                                 float(10 * np.log10(self._level[near].sum() / self.windows)),
+                                 float(self._z[near].sum() / n)))
         return out
