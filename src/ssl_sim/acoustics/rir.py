@@ -108,10 +108,14 @@ def diffuse_mixing(freqs_hz: np.ndarray, mics: np.ndarray, c: float = 343.0) -> 
     Depends only on inter-microphone distances: the same for every pose of a rigid array."""
     mics = np.asarray(mics, float)
     freqs = np.asarray(freqs_hz, float)
-    d = np.linalg.norm(mics[:, None, :] - mics[None, :, :], axis=-1)
+    # Distances rounded to 0.1 mm: every pose of a rigid array (whose distances differ only by rounding,
+    # ~1e-16 m) then gets bit-identical mixing, computed from the rounded distances alone. Matching a
+    # cached entry by closeness instead made a run's audio depend on the poses of earlier runs in the
+    # same process (int16 samples off by one LSB; a Dask sweep then disagreed with a local one).
+    d = np.round(np.linalg.norm(mics[:, None, :] - mics[None, :, :], axis=-1), 4)
     for f_k, d_k, c_k, mix in _MIXING_CACHE:
         if c_k == c and f_k.shape == freqs.shape and d_k.shape == d.shape and np.array_equal(f_k, freqs) \
-                and np.allclose(d_k, d, atol=2e-3):
+                and np.array_equal(d_k, d):
             return mix
     gamma = np.sinc(2.0 * freqs[:, None, None] * d[None] / c)
     w, v = np.linalg.eigh(gamma)
