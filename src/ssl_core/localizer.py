@@ -21,7 +21,7 @@ The whole recording (:meth:`Localizer.locate`) pools the windows' detections
 from __future__ import annotations
 
 import contextlib
-from collections.abc import Iterable
+from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 
 import numpy as np
@@ -274,42 +274,31 @@ class Localizer:
         Works on its own state: the streaming state (:meth:`process`) is left alone.
         """
         cfg = self.config
-        stream = self._new_stream()
         pool = DirectionPool(self.fine_grid.directions)
-        acc = {"gcc": 0.0, "w": 0.0, "w_sq": 0.0, "frames": 0, "ms": 0.0, "t": 0.0}
-
-        def take(r: LocalizationResult) -> None:
-            pool.add(r.detections)
-            acc["t"] = r.time
-            acc["frames"] += r.active_frames
-            acc["ms"] += r.active_frames * 10 ** (r.level_db / 10)
-            if r.weight_sum > 0:
-                acc["gcc"] = acc["gcc"] + r.weight_sum * r.gcc
-                acc["w"] += r.weight_sum
-                acc["w_sq"] += r.weight_sum**2 / r.n_eff
-
+        gcc_sum, w_sum, w_sq, ms_sum, frames, t_end = 0.0, 0.0, 0.0, 0.0, 0, 0.0
         with _one_blas_thread():
-            for block in blocks:
-                for r in self._process(self._check(block, fs), stream):
-                    take(r)
-            if stream.ms.size:  # the frames after the last full window form a short last one
-                t_end = ((stream.frames_done + stream.ms.size - 1) * cfg.hop + cfg.frame_size) / cfg.fs
-                take(self._window_result(stream.spec, stream.ms, t_end, stream.floor))
-            frames, w_sum, w_sq, ms_sum, t_end = acc["frames"], acc["w"], acc["w_sq"], acc["ms"], acc["t"]
+            for r in self._windows(blocks, fs, self._new_stream()):
+                pool.add(r.detections)
+                t_end = r.time
+                frames += r.active_frames
+                ms_sum += r.active_frames * 10 ** (r.level_db / 10)
+                if r.weight_sum > 0:
+                    gcc_sum = gcc_sum + r.weight_sum * r.gcc
+                    w_sum += r.weight_sum
+                    w_sq += r.weight_sum**2 / r.n_eff
             if frames == 0 or w_sum <= 0:
                 return LocalizationResult(t_end, [], np.zeros(self.coarse_grid.n_points), frames)
-            gcc, n_eff = acc["gcc"] / w_sum, w_sum**2 / w_sq
+            gcc, n_eff = gcc_sum / w_sum, w_sum**2 / w_sq
             detections = pool.modes(cfg.n_sources, np.deg2rad(cfg.min_separation_deg), min_windows=2)
             srp_map, peaks = self._search(gcc, n_eff)
+        level = float(10 * np.log10(ms_sum / frames))
         if not detections:  # no two windows agreed: the summed map's peaks, if significant
             for power, f, z in peaks:
                 u = self.fine_grid.directions[f]
                 az, el = azimuth_elevation(u)
                 # the beam level needs the spectra, gone by now: the recording's band level bounds it from above
-                detections.append(Detection(float(az), float(el), u.copy(), power,
-                                            float(10 * np.log10(ms_sum / frames)), z))
-        return LocalizationResult(t_end, detections, srp_map, frames, float(10 * np.log10(ms_sum / frames)),
-                                  gcc, w_sum, n_eff)
+                detections.append(Detection(float(az), float(el), u.copy(), power, level, z))
+        return LocalizationResult(t_end, detections, srp_map, frames, level, gcc, w_sum, n_eff)
 
     def srp_fine(self, result_or_gcc: np.ndarray) -> np.ndarray:
         """SRP power on the whole fine grid for a GCC (pairs, lags) - for plots, not for the hot path."""
@@ -339,6 +328,16 @@ class Localizer:
         with np.errstate(divide="ignore"):
             level = 10 * np.log10(ms / _FULL_SCALE_SINE_MS)
         return level >= self.config.min_level_dbfs
+
+    def _windows(self, blocks: Iterable, fs: int | None, st: _Stream) -> Iterator[LocalizationResult]:
+        """Every window of consecutive ``blocks`` on stream ``st``, the frames after the last full
+        window ending a short last one."""
+        for block in blocks:
+            yield from self._process(self._check(block, fs), st)
+        if st.ms.size:
+            t_end = st.start_time + ((st.frames_done + st.ms.size - 1) * self.config.hop + self.config.frame_size) \
+                / self.config.fs
+            yield self._window_result(st.spec, st.ms, t_end, st.floor)
 
     def _process(self, x: np.ndarray, st: _Stream) -> list[LocalizationResult]:
         """Append ``x`` to stream ``st``; analyse its complete frames and return the completed windows."""
