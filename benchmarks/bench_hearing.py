@@ -207,7 +207,11 @@ def cpu_child(seconds: float, pin: bool) -> dict:
             if tracker is not None:
                 tracker.update(r.detections, r.time)
     cpu = time.process_time() - t0
-    return {"cpu_ms_per_s": 1000 * cpu / seconds, "tracking": tracker is not None}
+    t0 = time.process_time()
+    loc.locate(x)  # the whole-recording answer on the same audio
+    cpu_locate = time.process_time() - t0
+    return {"cpu_ms_per_s": 1000 * cpu / seconds, "locate_cpu_ms_per_s": 1000 * cpu_locate / seconds,
+            "tracking": tracker is not None}
 
 
 def cpu_table(seconds: float) -> dict:
@@ -230,6 +234,7 @@ def main() -> None:
     ap.add_argument("--seconds", type=float, default=4.0)
     ap.add_argument("--pra-windows", type=int, default=4)
     ap.add_argument("--seed", type=int, default=0)
+    ap.add_argument("--methods", default=None, help="comma-separated rows to run (default: all); cpu = the CPU part")
     ap.add_argument("--cpu-child", type=float, default=None, help=argparse.SUPPRESS)
     ap.add_argument("--no-pin", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args()
@@ -239,21 +244,28 @@ def main() -> None:
     if a.quick:
         a.trials, a.seconds, a.pra_windows = 1, 2.0, 2
     tracking = _tracker_class() is not None
-    methods = ["engine/window", "engine+NS/window"] + (["engine+track"] if tracking else []) + \
-              ["whole recording", "whole recording+NS", "pra SRP", "pra NormMUSIC"]
+    rows = {"engine/window": lambda t, k: run_engine(t, k),
+            "engine+NS/window": lambda t, k: run_engine(t, k, noise_suppression=True),
+            "engine+track": lambda t, k: run_engine(t, k, track=True),
+            "engine+NS+track": lambda t, k: run_engine(t, k, noise_suppression=True, track=True),
+            "whole recording": lambda t, k: run_whole(t, k),
+            "whole recording+NS": lambda t, k: run_whole(t, k, noise_suppression=True),
+            "pra SRP": lambda t, k: run_pra("SRP", t, k, a.pra_windows),
+            "pra NormMUSIC": lambda t, k: run_pra("NormMUSIC", t, k, a.pra_windows)}
+    wanted = a.methods.split(",") if a.methods else [m for m in rows if tracking or "track" not in m] + ["cpu"]
+    unknown = [m for m in wanted if m not in rows and m != "cpu"]
+    if unknown:
+        raise SystemExit(f"--methods: unknown {unknown}; expected some of {list(rows) + ['cpu']}")
+    methods = [m for m in wanted if m in rows]
     table: dict[str, dict[str, dict]] = {m: {} for m in methods}
     conds = _conditions()
     for ci, (cname, cond) in enumerate(conds.items()):
+        if not methods:
+            break
         trials = make_trials(cond, a.trials, a.seconds, a.seed + 100 * ci)
         k = len(trials[0][1])
-        table["engine/window"][cname] = run_engine(trials, k)
-        table["engine+NS/window"][cname] = run_engine(trials, k, noise_suppression=True)
-        if tracking:
-            table["engine+track"][cname] = run_engine(trials, k, track=True)
-        table["whole recording"][cname] = run_whole(trials, k)
-        table["whole recording+NS"][cname] = run_whole(trials, k, noise_suppression=True)
-        table["pra SRP"][cname] = run_pra("SRP", trials, k, a.pra_windows)
-        table["pra NormMUSIC"][cname] = run_pra("NormMUSIC", trials, k, a.pra_windows)
+        for m in methods:
+            table[m][cname] = rows[m](trials, k)
         print(f"[{cname} done]", file=sys.stderr, flush=True)
     print(f"{a.trials} trials x {a.seconds:g} s per condition; hit % / false % / median error (deg) "
           f"(whole recording: trials with every talker within {HIT_DEG:g} deg / - / median error)\n")
@@ -267,11 +279,12 @@ def main() -> None:
             err = "-" if np.isnan(r["err_deg"]) else f"{r['err_deg']:.1f}"
             cells.append(f"{r['hit_pct']:.0f} / {false} / {err}")
         print(f"| {m} | " + " | ".join(cells) + " |")
-    cpu = cpu_table(a.seconds if a.quick else 20.0)
+    cpu = cpu_table(a.seconds if a.quick else 20.0) if "cpu" in wanted else {}
     label = "detection + tracking" if tracking else "detection"
-    print(f"\nCPU per second of audio, {label}, 1.5 deg grid, 100 ms blocks:")
+    if cpu:
+        print(f"\nCPU per second of audio, 1.5 deg grid: {label} streamed in 100 ms blocks; whole-recording locate:")
     for name, r in cpu.items():
-        print(f"  {name:26s} {r['cpu_ms_per_s']:6.2f} ms/s")
+        print(f"  {name:26s} {r['cpu_ms_per_s']:6.2f} ms/s   locate {r['locate_cpu_ms_per_s']:6.2f} ms/s")
     print(json.dumps({"bench": "hearing", "trials": a.trials, "seconds": a.seconds, "table": table, "cpu": cpu}))
 
 
