@@ -76,11 +76,12 @@ class TrackerConfig:
     # false-detection model): 1.7 deg at power 0.1-0.2, 3.3 at 0.08-0.1, 6.1 at 0.06-0.08, 7.1-7.7 below.
     measurement_sigma: tuple[tuple[float, float], ...] = ((0.05, 7.5), (0.07, 6.1), (0.09, 3.3), (0.115, 1.7))
     # Motion: velocity with white acceleration (sigma_a) that decays with time constant speed_memory_s
-    # (an integrated Ornstein-Uhlenbeck velocity): a talker 1.5 m away reaching walking pace (1 m/s,
-    # 38 deg/s) in ~2 s turns at ~20 deg/s^2 seen from the array, while a paused talker's noisy
-    # velocity estimate stops extrapolating instead of drifting through the pause.
-    acceleration_sigma_deg: float = 20.0      # deg/s^2
-    speed_memory_s: float = 2.0               # s
+    # (an integrated Ornstein-Uhlenbeck velocity), so a paused talker's noisy velocity estimate stops
+    # extrapolating. Chosen by a sweep (tests/test_tracking.py scenarios): sigma_a 10 deg/s^2 and 3 s
+    # follow a talker walking 30 deg/s within 9 deg and let a static talker's track drift < 8 deg through a
+    # 1.5 s pause; 20 deg/s^2 drifts 10 deg, 10 deg/s^2 with a 2 s memory lags the walker by 11 deg.
+    acceleration_sigma_deg: float = 10.0      # deg/s^2
+    speed_memory_s: float = 3.0               # s
     # A new track starts at rest, as in ODAS (its velocity prior is sigmaQ^2 = 1e-6); ours lets a talker
     # walking at 10 deg/s (0.25 m/s at 1.5 m) start moving at once.
     initial_speed_sigma_deg: float = 10.0     # deg/s
