@@ -200,10 +200,13 @@ class TrackHistory:
 
 def _tangent_basis(u: np.ndarray) -> np.ndarray:
     """Orthonormal bases (n, 3, 2) of the planes tangent to unit vectors ``u`` (n, 3)."""
-    a = np.where(np.abs(u[:, 2:3]) < 0.9, [0.0, 0.0, 1.0], [1.0, 0.0, 0.0])
-    e1 = np.cross(a, u)
+    x, y, z = u.T
+    polar = np.abs(z) >= 0.9
+    # e1 = a x u with a = +z (or +x near the poles), normalised; e2 = u x e1
+    e1 = np.where(polar[:, None], np.stack([0 * x, -z, y], 1), np.stack([-y, x, 0 * x], 1))
     e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
-    return np.stack([e1, np.cross(u, e1)], axis=2)
+    e2 = np.stack([y * e1[:, 2] - z * e1[:, 1], z * e1[:, 0] - x * e1[:, 2], x * e1[:, 1] - y * e1[:, 0]], 1)
+    return np.stack([e1, e2], axis=2)
 
 
 class SphereKalman:
@@ -217,6 +220,7 @@ class SphereKalman:
         self.sigma_a = np.deg2rad(config.acceleration_sigma_deg)
         self.sigma_v0 = np.deg2rad(config.initial_speed_sigma_deg)
         self.tau = config.speed_memory_s
+        self._cached_dt: float | None = None
 
     def initial(self, z: np.ndarray, sigma_r: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         """States of new tracks at detections ``z`` (m, 3) with direction errors ``sigma_r`` (m,) rad."""
@@ -232,10 +236,17 @@ class SphereKalman:
         return x @ B.T, B @ P @ B.T
 
     def predict(self, x: np.ndarray, P: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
-        decay = np.exp(-dt / self.tau)
-        F = np.kron([[1.0, self.tau * (1 - decay)], [0.0, decay]], np.eye(3))
-        Q = self.sigma_a**2 * np.kron([[dt**4 / 4, dt**3 / 2], [dt**3 / 2, dt**2]], np.eye(3))
+        F, Q = self._transition(dt)
         return self._on_sphere(x @ F.T, F @ P @ F.T + Q)
+
+    def _transition(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """F and Q for a step of ``dt`` s (cached: windows have a constant length)."""
+        if self._cached_dt != dt:
+            decay = np.exp(-dt / self.tau)
+            F = np.kron([[1.0, self.tau * (1 - decay)], [0.0, decay]], np.eye(3))
+            Q = self.sigma_a**2 * np.kron([[dt**4 / 4, dt**3 / 2], [dt**3 / 2, dt**2]], np.eye(3))
+            self._cached_dt, self._cached_FQ = dt, (F, Q)
+        return self._cached_FQ
 
     def innovations(self, x: np.ndarray, P: np.ndarray, z: np.ndarray, sigma_r: np.ndarray):
         """Log-map residuals ``r`` (n, m, 2), their covariances ``S`` (n, m, 2, 2) and the tangent bases
@@ -246,25 +257,27 @@ class SphereKalman:
         t = z[None] - c[..., None] * u[:, None]               # (n, m, 3) tangent components
         s = np.linalg.norm(t, axis=-1)
         scale = np.where(s > 1e-12, np.arctan2(s, c) / np.maximum(s, 1e-12), 1.0)
-        r = np.einsum("nmk,nkj->nmj", t, E) * scale[..., None]
-        HPH = np.einsum("nki,nkl,nlj->nij", E, P[:, :3, :3], E)
+        r = (t @ E) * scale[..., None]
+        HPH = E.transpose(0, 2, 1) @ P[:, :3, :3] @ E
         S = HPH[:, None] + (sigma_r**2)[None, :, None, None] * np.eye(2)
         return r, S, E
 
     @staticmethod
     def likelihood(r: np.ndarray, S: np.ndarray) -> np.ndarray:
         """Gaussian density (per steradian, tangent-plane approximation) of residuals ``r`` (..., 2)."""
-        det = S[..., 0, 0] * S[..., 1, 1] - S[..., 0, 1] * S[..., 1, 0]
-        inv = np.stack([np.stack([S[..., 1, 1], -S[..., 0, 1]], -1), np.stack([-S[..., 1, 0], S[..., 0, 0]], -1)], -2)
-        d2 = np.einsum("...i,...ij,...j->...", r, inv, r) / det
+        a, b, c = S[..., 0, 0], S[..., 0, 1], S[..., 1, 1]
+        det = a * c - b * b
+        d2 = (c * r[..., 0] ** 2 - 2 * b * r[..., 0] * r[..., 1] + a * r[..., 1] ** 2) / det
         return np.exp(-0.5 * d2) / (2 * np.pi * np.sqrt(det))
 
     def update(self, x, P, r, S, E, w) -> tuple[np.ndarray, np.ndarray]:
         """Probability-weighted update of tracks ``x`` by residuals ``r`` (n, 2), ``S`` (n, 2, 2), ``E``
         (n, 3, 2) with weights ``w`` (n,)."""
         PHt = P[:, :, :3] @ E                                  # (n, 6, 2)
-        K = PHt @ np.linalg.inv(S)
-        x = x + w[:, None] * np.einsum("nij,nj->ni", K, r)
+        a, b, c = S[:, 0, 0], S[:, 0, 1], S[:, 1, 1]
+        S_inv = np.stack([c, -b, -b, a], axis=1).reshape(-1, 2, 2) / (a * c - b * b)[:, None, None]
+        K = PHt @ S_inv
+        x = x + w[:, None] * (K @ r[:, :, None])[:, :, 0]
         P = P - w[:, None, None] * K @ PHt.transpose(0, 2, 1)
         return self._on_sphere(x, 0.5 * (P + P.transpose(0, 2, 1)))
 
@@ -272,7 +285,7 @@ class SphereKalman:
     def _on_sphere(x: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
         u = x[:, :3] / np.linalg.norm(x[:, :3], axis=1, keepdims=True)
         T = np.eye(3) - u[:, :, None] * u[:, None, :]
-        v = np.einsum("nij,nj->ni", T, x[:, 3:])
+        v = x[:, 3:] - np.sum(u * x[:, 3:], axis=1, keepdims=True) * u
         B = np.zeros(P.shape)
         B[:, :3, :3] = B[:, 3:, 3:] = T
         return np.concatenate([u, v], axis=1), B @ P @ B.transpose(0, 2, 1)
@@ -445,10 +458,11 @@ class Tracker:
     def _delete(self, time: float) -> None:
         cfg, tr = self.config, self._tracks
         failed = (tr.id == 0) & (tr.windows >= cfg.confirm_windows) & (tr.n_updates < cfg.confirm_hits)
-        silent = time - tr.last_time > cfg.silence_s
-        for k in tr.key[failed | silent]:
-            del self._history[int(k)]
-        self._tracks = tr.select(~(failed | silent))
+        gone = failed | (time - tr.last_time > cfg.silence_s)
+        if gone.any():
+            for k in tr.key[gone]:
+                del self._history[int(k)]
+            self._tracks = tr.select(~gone)
 
     def _initiate(self, z, sigma_r, power, level, time: float) -> None:
         m = len(z)
