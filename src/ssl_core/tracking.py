@@ -8,10 +8,11 @@ windows, and tracks deleted after a silence. All vectors are in the **array fram
 window; angles inside are rad, times s.
 
 Model (:class:`SphereKalman`), per track, state ``x = [u, v]``: direction ``u`` (unit vector) and its
-rate ``v = du/dt`` (1/s, tangent to the sphere at ``u``); constant velocity with white acceleration
-of spectral density ``sigma_a^2`` (``acceleration_sigma_deg``, rad/s^2):
+rate ``v = du/dt`` (1/s, tangent to the sphere at ``u``). The velocity is driven by white acceleration
+of spectral density ``sigma_a^2`` (``acceleration_sigma_deg``, rad/s^2) and decays with time constant
+``tau`` (``speed_memory_s``; tau -> inf is ODAS's constant-velocity model):
 
-    predict  x <- F x,  P <- F P F^T + Q,   F = [[I, dt I], [0, I]],
+    predict  x <- F x,  P <- F P F^T + Q,   F = [[I, tau (1 - a) I], [0, a I]],  a = exp(-dt / tau),
              Q = sigma_a^2 [[dt^4/4 I, dt^3/2 I], [dt^3/2 I, dt^2 I]]
     then     u <- u / |u|,  v <- T v,  P <- B P B^T,  T = I - u u^T,  B = diag(T, T)
 
@@ -20,33 +21,40 @@ projecting ``P`` too removes the radial variance a unit vector cannot have). A d
 measured in the tangent plane at ``u`` through the sphere's log map, ``r = E^T (z - (u.z) u) theta /
 sin(theta)`` (``E`` a 3x2 orthonormal tangent basis, ``theta`` the angle between ``u`` and ``z``), with
 ``H = [E^T, 0]`` and ``R = sigma_r^2 I_2``; ``sigma_r`` comes from the detection's SRP power
-(:meth:`TrackerConfig.measurement_sigma`). The update is ODAS's probability-weighted one:
+(:meth:`TrackerConfig.sigma_of_power`). The update is ODAS's probability-weighted one:
 
     S = H P H^T + R,  K = P H^T S^-1,  x <- x + w K r,  P <- P - w K H P
 
 with ``w`` the posterior probability that the detection belongs to the track.
 
-Association: a detection ``j`` is explained by track ``i`` with likelihood
-``l_ij = P_track N(r_ij; 0, S_ij)`` (per steradian), or by a new source or a false detection,
-both uniform on the sphere: ``l_0 = (P_new + P_false) / 4 pi``. The joint assignment maximising the
-product of likelihoods (each track and detection used at most once) is solved as a linear assignment
-(``scipy.optimize.linear_sum_assignment``); a pair is only ever chosen if ``l_ij > l_0``, which is the
-gate. ``w_ij = l_ij / (sum_k l_kj + l_0)``. A detection no track explains with probability
-``theta_new`` or more starts a tentative track.
+Association, as ODAS's: a detection ``j`` of SRP power ``E_j`` is a tracked source ``i``, a new
+source or a false detection, with likelihoods
+
+    l_ij = P_track p(E_j | active) N(r_ij; 0, S_ij),   l_new = P_new p(E_j | active) / 4 pi,
+    l_false = P_false p(E_j | inactive) / 4 pi
+
+(directions per steradian, new and false sources uniform on the sphere; ``p(E | .)`` log-normal,
+:meth:`TrackerConfig.power_likelihoods`). The joint assignment maximising the product of likelihoods
+(each track and detection used at most once; "new or false" always available) is a linear assignment
+(``scipy.optimize.linear_sum_assignment``); a pair is only chosen if ``l_ij > l_new + l_false``, which
+is the gate: about 11 deg around a settled track for strong detections, up to ~30 deg for weak ones.
+``w_ij = l_ij / (sum_k l_kj + l_new + l_false)``. An unassigned detection that is a new source with
+posterior ``theta_new`` or more starts a tentative track.
 
 Lifecycle: a tentative track is confirmed (and gets the next id, never reused) after
 ``confirm_hits`` associated detections within its first ``confirm_windows`` windows, and dropped
 otherwise; a confirmed track coasts (predicted, not updated) through pauses and is deleted once no
 detection was associated for ``silence_s``.
 
-False-alarm design: a false detection starts a tentative track only if its power makes a new source
-``theta_new`` likely (power >= 0.064 for the defaults; most false peaks are weaker), and that track is
-confirmed only if ``confirm_hits - 1`` more false detections fall into its gate (a cap of solid
-angle ``Omega``, about 0.2 sr for the defaults: 15 deg radius) within ``confirm_windows - 1``
-windows. For detections uniform on the sphere at ``r`` per window, all strong enough to start tracks,
-that is about ``r * C(4, 2) (r Omega / 4 pi)^2`` per window: at ``r = 0.1`` (ten times the 1 % of
-windows the localizer's gate is meant to let through) 1.5e-6 per window, one false track per ~20 h of
-audio. Tested in tests/test_tracking.py.
+False-alarm design: a false detection starts a tentative track only if its power makes it a new
+source with probability ``theta_new`` (power >= 0.064 for the defaults; false peaks are mostly
+weaker), and that track is confirmed only if ``confirm_hits - 1`` more fall into its gate (a cap of
+solid angle ``Omega`` ~ 0.12 sr for strong detections) within ``confirm_windows - 1`` windows. For
+strong false detections uniform on the sphere at ``r`` per window that happens at about
+``r C(4, 2) (r Omega / 4 pi)^2`` per window: at ``r = 0.1`` (ten times the 1 % of windows the
+localizer's gate is meant to let through) 5e-7, one false track per ~70 h of audio. Measured
+(tests/test_tracking.py): none in 10 min at that rate, none in 10 min of false peaks with the measured
+false-peak powers in half the windows; at one such false peak in every window, 1-2 per 10 min.
 
 Activity: a two-state (sounding / silent) Bayes filter per track. Between windows the state switches
 with the rates of conversational talk spurts and pauses (``talk_s``, ``pause_s``); a window is
@@ -94,21 +102,23 @@ class TrackerConfig:
     # active/inactive Gaussians on its power. Measured on ssl_core.localizer's default windows (128 ms,
     # 300-6000 Hz, min_power 0), one talker at 1.5 m, RT60 0.5 s: detections within 10 deg of the talker
     # have median power 0.11 (SNR 20 dB) and 0.058 (SNR 5 dB), those over 20 deg off (reflections, noise
-    # in pauses) 0.022 (5-95 %: 0.012-0.055, i.e. +-0.2 decades).
+    # in pauses) 0.022 (5-95 %: 0.012-0.055, i.e. +-0.2 decades). active_power sits between the two
+    # talker medians, nearer the weak one the tracker must not lose.
     active_power: float = 0.07
     inactive_power: float = 0.022
     power_spread_decades: float = 0.22
     # Birth: 3 hits in the first 5 windows (0.64 s of 128 ms windows). ODAS asks N_prob = 5 frames of
     # 8 ms with mean P(tracked) >= 0.8; 3-of-5 confirms a talker at SNR 5 dB within ~1 s although the
     # localizer's peak misses her in ~40 % of windows there (measured, tests/test_tracking.py), and keeps
-    # uniform false detections at 10 % of windows to ~1 false track per 60 h (module docstring).
+    # strong false detections in 10 % of windows to ~1 false track per 70 h (module docstring).
     confirm_hits: int = 3
     confirm_windows: int = 5
     # Death after 2 s without a detection: ODAS N_inactive = 250 frames of 8 ms (its longest).
     silence_s: float = 2.0
     # Activity filter. Talk spurts ~1.0 s, pauses ~1.35 s: Brady (1969), "A model for generating on-off
     # speech patterns in two-way conversation", Bell Syst. Tech. J. 48. Hit rates: the localizer
-    # detects an active talker in ~90 % of 128 ms windows at SNR 20 dB (issue 11), fewer in noise.
+    # detects an active talker in ~90 % of 128 ms windows at SNR 20 dB (issue 11), fewer in noise; a
+    # silent source's gate (~0.1 sr, 1 % of the sphere) catches a false peak in at most a few % of windows.
     talk_s: float = 1.0
     pause_s: float = 1.35
     detect_probability: float = 0.8
@@ -199,14 +209,18 @@ class TrackHistory:
 
 
 def _tangent_basis(u: np.ndarray) -> np.ndarray:
-    """Orthonormal bases (n, 3, 2) of the planes tangent to unit vectors ``u`` (n, 3)."""
+    """Orthonormal bases (n, 3, 2) of the planes tangent to unit vectors ``u`` (n, 3): ``e1 = a x u``
+    normalised, with ``a = +z`` (``+x`` near the poles), and ``e2 = u x e1``."""
     x, y, z = u.T
     polar = np.abs(z) >= 0.9
-    # e1 = a x u with a = +z (or +x near the poles), normalised; e2 = u x e1
-    e1 = np.where(polar[:, None], np.stack([0 * x, -z, y], 1), np.stack([-y, x, 0 * x], 1))
-    e1 /= np.linalg.norm(e1, axis=1, keepdims=True)
-    e2 = np.stack([y * e1[:, 2] - z * e1[:, 1], z * e1[:, 0] - x * e1[:, 2], x * e1[:, 1] - y * e1[:, 0]], 1)
-    return np.stack([e1, e2], axis=2)
+    E = np.empty((len(u), 3, 2))
+    e1, e2 = E[:, :, 0], E[:, :, 1]
+    e1[:, 0], e1[:, 1], e1[:, 2] = np.where(polar, 0.0, -y), np.where(polar, -z, x), np.where(polar, y, 0.0)
+    e1 /= np.sqrt((e1 * e1).sum(axis=1))[:, None]
+    e2[:, 0] = y * e1[:, 2] - z * e1[:, 1]
+    e2[:, 1] = z * e1[:, 0] - x * e1[:, 2]
+    e2[:, 2] = x * e1[:, 1] - y * e1[:, 0]
+    return E
 
 
 class SphereKalman:
@@ -241,6 +255,7 @@ class SphereKalman:
 
     def _transition(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
         """F and Q for a step of ``dt`` s (cached: windows have a constant length)."""
+        dt = round(dt, 9)  # window times are sums of floats: k * 0.128 - (k - 1) * 0.128 varies in the last bits
         if self._cached_dt != dt:
             decay = np.exp(-dt / self.tau)
             F = np.kron([[1.0, self.tau * (1 - decay)], [0.0, decay]], np.eye(3))
@@ -255,7 +270,7 @@ class SphereKalman:
         E = _tangent_basis(u)
         c = np.clip(z @ u.T, -1.0, 1.0).T                     # (n, m) cos of the angle
         t = z[None] - c[..., None] * u[:, None]               # (n, m, 3) tangent components
-        s = np.linalg.norm(t, axis=-1)
+        s = np.sqrt((t * t).sum(axis=-1))
         scale = np.where(s > 1e-12, np.arctan2(s, c) / np.maximum(s, 1e-12), 1.0)
         r = (t @ E) * scale[..., None]
         HPH = E.transpose(0, 2, 1) @ P[:, :3, :3] @ E
@@ -283,7 +298,7 @@ class SphereKalman:
 
     @staticmethod
     def _on_sphere(x: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
-        u = x[:, :3] / np.linalg.norm(x[:, :3], axis=1, keepdims=True)
+        u = x[:, :3] / np.sqrt((x[:, :3] ** 2).sum(axis=1))[:, None]
         T = np.eye(3) - u[:, :, None] * u[:, None, :]
         v = x[:, 3:] - np.sum(u * x[:, 3:], axis=1, keepdims=True) * u
         B = np.zeros(P.shape)
