@@ -69,6 +69,7 @@ from typing import Sequence
 import numpy as np
 from scipy.optimize import linear_sum_assignment
 
+from ssl_core.grid import azimuth_elevation
 from ssl_core.localizer import Detection
 
 _FOUR_PI = 4.0 * np.pi
@@ -183,12 +184,12 @@ class Track:
     @property
     def azimuth(self) -> float:
         """rad, CCW from the array's +x, in (-pi, pi]."""
-        return float(np.arctan2(self.direction[1], self.direction[0]))
+        return float(azimuth_elevation(self.direction)[0])
 
     @property
     def elevation(self) -> float:
         """rad, up from the array's x-y plane."""
-        return float(np.arcsin(np.clip(self.direction[2], -1.0, 1.0)))
+        return float(azimuth_elevation(self.direction)[1])
 
     @property
     def azimuth_deg(self) -> float:
@@ -224,7 +225,8 @@ def _tangent_basis(u: np.ndarray) -> np.ndarray:
 
 
 class SphereKalman:
-    """Constant-velocity Kalman filter on the unit sphere, batched over tracks (see module docstring).
+    """Kalman filter on the unit sphere with a decaying velocity, batched over tracks (see the module
+    docstring; ``Q`` is the white-acceleration one, exact for ``dt << speed_memory_s``).
 
     States are ``x`` (n, 6) = [direction, velocity] and ``P`` (n, 6, 6); methods return new arrays.
     """
@@ -361,15 +363,11 @@ class Tracker:
         (``v_now = R @ v_prev``), e.g. from an odometry/IMU yaw change ``dpsi``: ``R = Rz(-dpsi)``.
         Returns the confirmed tracks, by id.
         """
-        dt = self._advance(time)
         z, power, level = self._measurements(detections)
+        R = None if rotation is None else self._check_rotation(rotation)
+        dt = self._advance(time)
         sigma_r = self.config.sigma_of_power(power)
-        tr = self._tracks
-        if rotation is not None and len(tr):
-            tr.x, tr.P = self.model.rotate(tr.x, tr.P, self._check_rotation(rotation))
-        if len(tr):
-            tr.x, tr.P = self.model.predict(tr.x, tr.P, dt)
-        tr.windows += 1
+        self._predict(dt, R)
         pairs, w, new, innovations = self._associate(z, sigma_r, power)
         self._correct(pairs, w, innovations, power, level, time)
         self._update_activity(pairs, w, dt)
@@ -416,6 +414,14 @@ class Tracker:
         if R.shape != (3, 3) or not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
             raise ValueError(f"rotation: expected a 3x3 rotation matrix (orthonormal, det +1), got {R.tolist()}")
         return R
+
+    def _predict(self, dt: float, rotation: np.ndarray | None) -> None:
+        """Move every track into the current array frame (``rotation``), then ``dt`` s forward."""
+        tr = self._tracks
+        if rotation is not None:
+            tr.x, tr.P = self.model.rotate(tr.x, tr.P, rotation)
+        tr.x, tr.P = self.model.predict(tr.x, tr.P, dt)
+        tr.windows += 1
 
     def _associate(self, z: np.ndarray, sigma_r: np.ndarray, power: np.ndarray):
         """Best joint assignment; returns (track, detection) index pairs, their posteriors ``w``, a mask
