@@ -118,6 +118,20 @@ def test_two_alternating_talkers_keep_two_stable_ids():
     assert sorted(owner) == [1, 2]
 
 
+def test_two_simultaneous_talkers_40_deg_apart_never_swap():
+    """Two detections per window (the localizer with n_sources=2), strongest first in random order."""
+    rng = np.random.default_rng(7)
+    t = Tracker()
+    talkers = [(-20.0, 0.0), (20.0, 5.0)]
+    owner: dict[int, int] = {}
+    for k in range(int(8 / WINDOW)):
+        dets = [noisy(rng, *talkers[i]) for i in rng.permutation(2) if rng.random() < 0.9]
+        for o in t.update(dets, k * WINDOW):
+            nearest = int(np.argmin([err_deg(o, *w) for w in talkers]))
+            assert owner.setdefault(o.id, nearest) == nearest and err_deg(o, *talkers[nearest]) < 5.0
+    assert sorted(owner) == [1, 2] and sorted(owner.values()) == [0, 1]
+
+
 def test_talker_moving_30_deg_per_s_is_followed_within_10_deg():
     rng = np.random.default_rng(3)
     t = Tracker()
