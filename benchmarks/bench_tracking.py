@@ -36,7 +36,8 @@ def scenario(seconds: float, seed: int = 0) -> list[list[Detection]]:
         dets = []
         az = (40.0 + 20.0 * t) if int(t // 2.0) % 2 else -100.0
         if rng.random() < 0.85:
-            dets.append(detection(direction_from_angles(np.deg2rad(az + rng.normal(0, 2)), np.deg2rad(rng.normal(10, 2))), 0.1))
+            u = direction_from_angles(np.deg2rad(az + rng.normal(0, 2)), np.deg2rad(rng.normal(10, 2)))
+            dets.append(detection(u, 0.1))
         if rng.random() < 0.3:
             v = rng.standard_normal(3)
             dets.append(detection(v / np.linalg.norm(v), float(10 ** rng.normal(np.log10(0.022), 0.2))))

@@ -24,7 +24,8 @@ def noisy(rng, az_deg, el_deg, sigma_deg=2.0, power=0.12) -> Detection:
 
 
 def err_deg(track, az_deg, el_deg=0.0) -> float:
-    return float(np.rad2deg(angular_distance(track.direction, direction_from_angles(np.deg2rad(az_deg), np.deg2rad(el_deg)))))
+    truth = direction_from_angles(np.deg2rad(az_deg), np.deg2rad(el_deg))
+    return float(np.rad2deg(angular_distance(track.direction, truth)))
 
 
 def rz(angle: float) -> np.ndarray:

@@ -135,8 +135,8 @@ class TrackerConfig:
         need(table.ndim == 2 and table.shape[1] == 2 and len(table) >= 1 and np.all(table > 0)
              and np.all(np.diff(table[:, 0]) > 0), "measurement_sigma",
              "(power, sigma_deg) pairs with positive values and increasing power")
-        for name in ("speed_memory_s", "acceleration_sigma_deg", "initial_speed_sigma_deg",
-                     "active_power", "inactive_power", "power_spread_decades", "talk_s", "pause_s", "silence_s", "history_s"):
+        for name in ("speed_memory_s", "acceleration_sigma_deg", "initial_speed_sigma_deg", "active_power",
+                     "inactive_power", "power_spread_decades", "talk_s", "pause_s", "silence_s", "history_s"):
             need(np.isfinite(getattr(self, name)) and getattr(self, name) > 0, name, "a finite number > 0")
         for name in ("p_track", "p_new", "p_false"):
             need(0 < getattr(self, name) < 1, name, "a probability in (0, 1)")
@@ -411,7 +411,7 @@ class Tracker:
     @staticmethod
     def _check_rotation(rotation) -> np.ndarray:
         R = np.asarray(rotation, dtype=float)
-        if R.shape != (3, 3) or not np.allclose(R @ R.T, np.eye(3), atol=1e-6) or np.linalg.det(R) < 0:
+        if R.shape != (3, 3) or not np.allclose(R @ R.T, np.eye(3), atol=1e-5) or np.linalg.det(R) < 0:
             raise ValueError(f"rotation: expected a 3x3 rotation matrix (orthonormal, det +1), got {R.tolist()}")
         return R
 
