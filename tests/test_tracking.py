@@ -281,3 +281,24 @@ def test_simulated_talker_is_tracked(snr_db, tolerance_deg, required):
         total += int(active.sum())
         assert len(ids) <= 2, ids  # one talker, at most one spurious track
     assert total >= 30 and good / total >= required, (good, total)
+
+
+def test_simulated_talker_keeps_its_id_while_the_robot_turns_90_deg():
+    """3 s of a talker at azimuth 30 deg, then the robot turns 90 deg CCW in place (the talker is now at
+    -60 deg in the array frame) and listens 3 s more; the rotation is given at the first window after it."""
+    before, u0, _ = _talker_windows(30.0, 10.0, 20.0, seed=0, duration_s=3.0)
+    after, u1, _ = _talker_windows(-60.0, 10.0, 20.0, seed=1, duration_s=3.0)
+    t = Tracker()
+    for w in before:
+        out = t.update(w.detections, w.time)
+    assert [o.id for o in out] == [1] and np.rad2deg(angular_distance(out[0].direction, u0)) < 5.0
+    offset = before[-1].time
+    ids = set()
+    for k, w in enumerate(after):
+        out = t.update(w.detections, offset + w.time, rotation=rz(-np.pi / 2) if k == 0 else None)
+        ids |= {o.id for o in out}
+        assert 1 in {o.id for o in out}
+        if k == 0:  # the rotation moved the track before association: the new pose's first detection is its own
+            track = next(o for o in out if o.id == 1)
+            assert np.rad2deg(angular_distance(track.direction, u1)) < 8.0
+    assert ids == {1} and np.rad2deg(angular_distance(out[0].direction, u1)) < 5.0
