@@ -14,10 +14,11 @@ of spectral density ``sigma_a^2`` (``acceleration_sigma_deg``, rad/s^2) and deca
 
     predict  x <- F x,  P <- F P F^T + Q,   F = [[I, tau (1 - a) I], [0, a I]],  a = exp(-dt / tau),
              Q = sigma_a^2 [[dt^4/4 I, dt^3/2 I], [dt^3/2 I, dt^2 I]]
-    then     u <- u / |u|,  v <- T v,  P <- B P B^T,  T = I - u u^T,  B = diag(T, T)
+    then     u <- u / |u|,  v <- T v,   T = I - u u^T
+    and after each update also  P <- B P B^T,  B = diag(T, T)
 
-The last line keeps the state on the sphere (ODAS renormalises and projects the velocity the same way;
-projecting ``P`` too removes the radial variance a unit vector cannot have). A detection ``z`` is
+This keeps the state on the sphere (ODAS renormalises and projects the velocity the same way; projecting
+``P`` too removes the radial variance a unit vector cannot have). A detection ``z`` is
 measured in the tangent plane at ``u`` through the sphere's log map, ``r = E^T (z - (u.z) u) theta /
 sin(theta)`` (``E`` a 3x2 orthonormal tangent basis, ``theta`` the angle between ``u`` and ``z``), with
 ``H = [E^T, 0]`` and ``R = sigma_r^2 I_2``; ``sigma_r`` comes from the detection's SRP power
@@ -254,8 +255,10 @@ class SphereKalman:
         return x @ B.T, B @ P @ B.T
 
     def predict(self, x: np.ndarray, P: np.ndarray, dt: float) -> tuple[np.ndarray, np.ndarray]:
+        """``dt`` s ahead. ``P`` keeps a small radial part here: only its tangent part is ever read
+        (``innovations``), and ``update`` / ``initial`` project it."""
         F, Q = self._transition(dt)
-        return self._on_sphere(x @ F.T, F @ P @ F.T + Q)
+        return self._unit(x @ F.T), F @ P @ F.T + Q
 
     def _transition(self, dt: float) -> tuple[np.ndarray, np.ndarray]:
         """F and Q for a step of ``dt`` s (cached: windows have a constant length)."""
@@ -301,13 +304,19 @@ class SphereKalman:
         return self._on_sphere(x, 0.5 * (P + P.transpose(0, 2, 1)))
 
     @staticmethod
-    def _on_sphere(x: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+    def _unit(x: np.ndarray) -> np.ndarray:
+        """States with unit ``u`` and ``v`` tangent at it."""
         u = x[:, :3] / np.sqrt((x[:, :3] ** 2).sum(axis=1))[:, None]
-        T = np.eye(3) - u[:, :, None] * u[:, None, :]
-        v = x[:, 3:] - np.sum(u * x[:, 3:], axis=1, keepdims=True) * u
+        return np.concatenate([u, x[:, 3:] - np.sum(u * x[:, 3:], axis=1, keepdims=True) * u], axis=1)
+
+    @classmethod
+    def _on_sphere(cls, x: np.ndarray, P: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``_unit`` states and ``P`` projected on the tangent planes (module docstring)."""
+        x = cls._unit(x)
+        u = x[:, :3]
         B = np.zeros(P.shape)
-        B[:, :3, :3] = B[:, 3:, 3:] = T
-        return np.concatenate([u, v], axis=1), B @ P @ B.transpose(0, 2, 1)
+        B[:, :3, :3] = B[:, 3:, 3:] = np.eye(3) - u[:, :, None] * u[:, None, :]
+        return x, B @ P @ B.transpose(0, 2, 1)
 
 
 @dataclass
