@@ -158,7 +158,7 @@ def _turn_run(give_rotation: bool, world_az: float = 30.0, turn_deg: float = 90.
     rng = np.random.default_rng(4)
     t = Tracker()
     outs, truth = [], []
-    for k in range(int(6 / WINDOW)):
+    for k in range(int((2.5 + TrackerConfig().silence_s) / WINDOW)):
         time = k * WINDOW
         yaw = turn_deg if time > 2.0 else 0.0
         turned = give_rotation and k > 0 and (k - 1) * WINDOW <= 2.0 < time
@@ -227,21 +227,24 @@ def test_false_detections_uniform_on_the_sphere_make_no_lasting_track(rate, powe
 
 
 # ---------------------------------------------------------------------- the localizer's detections of a talker
-def _talker_windows(az_deg: float, el_deg: float, snr_db: float, seed: int, duration_s: float = 6.0):
-    """One talker (speech-like calls) 1.5 m away in a 6 x 5 x 3 m room with RT60 0.5 s, white sensor
-    noise at ``snr_db`` re the talker's active level at the mics. Returns the localizer's windows, the
-    true direction (array frame) and the dry signal."""
+def _talker_windows(az_deg: float, el_deg: float, snr_db: float, seed: int, duration_s: float = 6.0,
+                    calls: bool = False, distance_m: float = 1.5):
+    """One talker (near-continuous speech-like calls, or a victim's calls every 2.5 s) ``distance_m``
+    away in a 6 x 5 x 3 m room with RT60 0.5 s, white sensor noise at ``snr_db`` re the talker's active
+    level at the mics. Returns the localizer's windows, the true direction (array frame) and the dry
+    signal."""
     pra = pytest.importorskip("pyroomacoustics")
-    from ssl_sim.acoustics.voices import continuous_voice
+    from ssl_sim.acoustics.voices import continuous_voice, victim_voice
 
     g = cube8()
     room_dim = np.array([6.0, 5.0, 3.0])
     e_abs, max_order = pra.inverse_sabine(0.5, room_dim)
     centre = np.array([2.6, 2.2, 1.2])
     u = direction_from_angles(np.deg2rad(az_deg), np.deg2rad(el_deg))
-    s = continuous_voice("male", seed=seed).render(0, int(duration_s * FS))
+    voice = victim_voice("calls", seed=seed) if calls else continuous_voice("male", seed=seed)
+    s = voice.render(0, int(duration_s * FS))
     room = pra.ShoeBox(room_dim, fs=FS, materials=pra.Material(e_abs), max_order=min(max_order, 12))
-    room.add_source(centre + 1.5 * u, signal=s)
+    room.add_source(centre + distance_m * u, signal=s)
     room.add_microphone_array((centre + g.positions).T)
     room.simulate()
     x = room.mic_array.signals[:, : s.size]
@@ -304,3 +307,15 @@ def test_simulated_talker_keeps_its_id_while_the_robot_turns_90_deg():
             track = next(o for o in out if o.id == 1)
             assert np.rad2deg(angular_distance(track.direction, u1)) < 8.0
     assert ids == {1} and np.rad2deg(angular_distance(out[0].direction, u1)) < 5.0
+
+
+def test_victim_calling_every_few_seconds_keeps_one_id():
+    """30 s of a victim's calls (one per 2.5 s period, gaps up to ~4 s) at 2 m, SNR 20 dB: one track,
+    on the victim, for the whole run (``silence_s`` outlasts the gaps)."""
+    windows, u, _ = _talker_windows(40.0, 10.0, 20.0, seed=0, duration_s=30.0, calls=True, distance_m=2.0)
+    t = Tracker()
+    errors: dict[int, list[float]] = {}
+    for w in windows:
+        for o in t.update(w.detections, w.time):
+            errors.setdefault(o.id, []).append(float(np.rad2deg(angular_distance(o.direction, u))))
+    assert list(errors) == [1] and np.median(errors[1]) < 3.0 and max(errors[1]) < 10.0

@@ -115,8 +115,11 @@ class TrackerConfig:
     # strong false detections in 10 % of windows to ~1 false track per 70 h (module docstring).
     confirm_hits: int = 3
     confirm_windows: int = 5
-    # Death after 2 s without a detection: ODAS N_inactive = 250 frames of 8 ms (its longest).
-    silence_s: float = 2.0
+    # Death after 4 s without a detection. ODAS uses up to 2 s (N_inactive = 250 frames of 8 ms) for
+    # conversation; victims call with longer gaps: on 30 s of ssl_sim victim_voice calls (one per 2.5 s
+    # period, 90 % of periods) at 2 m, RT60 0.5 s, SNR 20 / 5 dB, 2 s gave 2-5 ids per victim, 4 s one
+    # (measured, three seeds each; a spurious reflection track aside).
+    silence_s: float = 4.0
     # Activity filter. Mean talk spurt 1.0 s and pause 1.6 s of conversational speech: ITU-T P.59
     # (artificial conversational speech; 1.004 s and 1.587 s). Hit rates: the localizer
     # detects an active talker in ~90 % of 128 ms windows at SNR 20 dB (issue 11), fewer in noise; a
