@@ -371,7 +371,8 @@ class Tracker:
 
     def update(self, detections: Sequence[Detection], time: float,
                rotation: np.ndarray | None = None) -> list[Track]:
-        """Advance to window time ``time`` (s) with this window's ``detections`` (may be empty).
+        """Advance to window time ``time`` (s) with this window's ``detections``. Pass every window, also
+        those without detections: tracks coast and age by the stream time.
 
         ``rotation``: 3x3 R mapping the PREVIOUS array frame's vectors into the CURRENT array frame
         (``v_now = R @ v_prev``), e.g. from an odometry/IMU yaw change ``dpsi``: ``R = Rz(-dpsi)``.
@@ -461,6 +462,7 @@ class Tracker:
         return pairs, w, new, innovations
 
     def _correct(self, pairs, w, innovations, power, level, time: float) -> None:
+        """Kalman-update the associated tracks and record their detections' power and level."""
         if not len(pairs):
             return
         tr, (i, j) = self._tracks, pairs.T
@@ -491,6 +493,7 @@ class Tracker:
         return pd / (pd + pf)
 
     def _delete(self, time: float) -> None:
+        """Drop tentative tracks that missed their confirmation and tracks silent for ``silence_s``."""
         cfg, tr = self.config, self._tracks
         failed = (tr.id == 0) & (tr.windows >= cfg.confirm_windows) & (tr.n_updates < cfg.confirm_hits)
         gone = failed | (time - tr.last_time > cfg.silence_s)
@@ -500,6 +503,7 @@ class Tracker:
             self._tracks = tr.select(~gone)
 
     def _initiate(self, z, sigma_r, power, level, time: float) -> None:
+        """Start a tentative track (no id yet) at each new-source detection."""
         m = len(z)
         if not m:
             return
@@ -513,6 +517,7 @@ class Tracker:
             np.full(m, time), np.full(m, time), np.ones(m, int), np.ones(m, int)))
 
     def _confirm(self) -> None:
+        """Give tentative tracks with ``confirm_hits`` detections the next ids."""
         tr = self._tracks
         new = np.flatnonzero((tr.id == 0) & (tr.n_updates >= self.config.confirm_hits))
         tr.id[new] = np.arange(self._next_id, self._next_id + len(new))
