@@ -122,6 +122,28 @@ def _open_audio(args, clock: Clock, geometry, out):
     return cap
 
 
+def _monitored(args, audio, geometry, localizer, out):
+    """``audio`` watched by the microphone health monitor: faults printed, faulty channels not localized."""
+    from robot.hardware.audio import parse_channel_map
+    from robot.monitored_audio import MonitoredAudio
+    from ssl_core.health import HealthConfig, MicHealth
+
+    cmap = parse_channel_map(args.channel_map)
+    devices = [d for d, _ in cmap] if len(cmap) == geometry.n_mics else None
+
+    def report(time: float, new, cleared) -> None:
+        for state, faults in (("fault", new), ("cleared", cleared)):
+            for f in faults:
+                if args.json:
+                    print(json.dumps({"time": round(time, 3), "microphone": state, "kind": f.kind,
+                                      "channels": list(f.channels), "detail": f.detail}), file=out, flush=True)
+                else:
+                    print(f"{PROG}: microphone {state} at {time:.1f} s: {f}", file=out, flush=True)
+
+    monitor = MicHealth(geometry, HealthConfig(fs=audio.sample_rate), devices=devices)
+    return MonitoredAudio(audio, monitor, localizer, on_change=report)
+
+
 class _MissionClock(WallClock):
     """Wall time from the start of the program (s), so printed event times read as mission time."""
 
@@ -185,8 +207,9 @@ def main(argv: list[str] | None = None, out=None) -> int:
         clock: Clock = ManualClock() if args.replay and not args.realtime else _MissionClock()
         drive = _open_drive(args, clock)
         audio = _open_audio(args, clock, geometry, out)
-        localizer = Localizer(geometry, LocalizerConfig(fs=audio.sample_rate, n_sources=max(1, args.sources),
+        localizer = Localizer(geometry, LocalizerConfig(fs=audio.sample_rate, n_sources=args.sources,
                                                         rel_threshold=args.rel_threshold))
+        audio = _monitored(args, audio, geometry, localizer, out)
     except (ValueError, FileNotFoundError, ImportError, OSError, RuntimeError) as exc:
         for dev in (drive, audio):
             if dev is not None:

@@ -39,8 +39,10 @@ from scipy import sparse
 from scipy.sparse.csgraph import dijkstra
 
 from robot.odometry import wrap_angle
+from robot.monitored_audio import MonitoredAudio
 from robot.rescue import RescueBehaviour, RescueEvent
 from ssl_core.geometry import cube8
+from ssl_core.health import HealthConfig, MicHealth
 from ssl_core.localizer import Localizer
 from ssl_sim.acoustics import AcousticSimulator
 from ssl_sim.backends import SimAudioSource, array_frame_directions
@@ -182,8 +184,12 @@ class RescueRun:
         self.audio = SimAudioSource(robot, acoustics, on_block=self._on_block)
         self.drive = SimDriveBase(robot)
         self.clock = _TracingClock(robot, self._on_tick)
-        self.localizer = _RecordingLocalizer(Localizer(cube8(), sc.localizer), self._on_result)
-        self.behaviour = RescueBehaviour(self.audio, self.drive, self.clock, self.localizer, sc.behaviour,
+        localizer = Localizer(cube8(), sc.localizer)
+        self.localizer = _RecordingLocalizer(localizer, self._on_result)
+        # The robot's microphone health monitor, as on the real robot (faults go to rerun and results).
+        self.mic_health = MonitoredAudio(self.audio, MicHealth(cube8(), HealthConfig(fs=sc.localizer.fs)),
+                                         localizer, on_change=self._on_mic_faults)
+        self.behaviour = RescueBehaviour(self.mic_health, self.drive, self.clock, self.localizer, sc.behaviour,
                                          params=robot.params, start_pose=world.robot_start)
         self.paths = FreeSpacePaths(world)
         # truth bookkeeping
@@ -235,6 +241,11 @@ class RescueRun:
                 self.collisions.append({"time_s": _r(now, 2), "position": [_r(v) for v in touching.position],
                                         "obstacle": touching.obstacle, "geom": touching.world_geom})
             self._last_contact_t = now
+
+    def _on_mic_faults(self, t: float, new, cleared) -> None:
+        for state, faults in (("microphone fault", new), ("microphone fault cleared", cleared)):
+            for f in faults:
+                self.logger.event(t, "health", f"{state}: {f}", "WARN" if f in new else "INFO")
 
     def _on_block(self, block, mics) -> None:
         self._last_block = (int(round(block.timestamp * block.sample_rate)), block.samples.shape[1])
@@ -429,6 +440,8 @@ class RescueRun:
             "angular_error_deg": {"all_detections": stats(errs), "strongest_detection": stats(first)},
             "listens": self.listens,
             "events": [str(e) for e in self.events],
+            "microphone_faults": [{"time_s": _r(t, 2), "state": state, "kind": f.kind, "channels": list(f.channels),
+                                   "detail": f.detail} for t, state, f in self.mic_health.history],
             "config": {"behaviour": asdict(sc.behaviour), "localizer": asdict(sc.localizer),
                        "acoustics": dict(sc.acoustics),
                        "noise": asdict(sc.noise) if sc.noise is not None else None},
