@@ -47,6 +47,11 @@ def test_unwritable_out_fails_before_simulating(tmp_path, monkeypatch, capsys):
     assert code == 2 and "--rerun save:" in err
     with pytest.raises(runner.OutputPathError, match="out_dir"):
         runner.run_scenario("paper_lab", out_dir=tmp_path / "a_file" / "x")
+    import ssl_sim.sweep as sweep
+
+    monkeypatch.setattr(sweep, "run_sweep", no_sim)
+    code = cli.main(["sweep", "paper_lab", "--seeds", "0:2", "-q", "--out", str(tmp_path / "a_file" / "sweep")])
+    assert code == 2 and "--out" in capsys.readouterr().err
 
 
 def test_connect_to_a_closed_port_falls_back_to_a_file_at_once(tmp_path, caplog):

@@ -41,9 +41,11 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _sweep(args: argparse.Namespace) -> int:
+    from ssl_sim.runner import check_output_dir
     from ssl_sim.sweep import markdown_table, parse_seeds, run_sweep, summarize, write_tables
 
     seeds = parse_seeds(args.seeds)
+    check_output_dir(args.out, "--out")  # now, not after the whole sweep
     rows = run_sweep(args.scenarios, seeds, cluster=args.cluster, workers=args.workers,
                      time_limit_s=args.time_limit, progress=not args.quiet)
     tables = summarize(rows)
