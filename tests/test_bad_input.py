@@ -98,6 +98,30 @@ def test_a_start_on_drivable_debris_is_refused_naming_the_field(tmp_path):
     load_scenario(_scenario(tmp_path, GOOD.replace("[1.0, 1.0, 0.0]", f"[{clear[0][0]:.4f}, {clear[0][1]:.4f}, 0.0]")))
 
 
+def test_the_refused_starts_are_those_the_physics_moves():
+    """Independent truth for the rule: 1 s of physics without a command. A start with a wheel on debris moves
+    the robot; a start the rule accepts leaves it where it was put."""
+    from dataclasses import replace
+
+    from ssl_sim.physics import SimRobot
+
+    world = load_scene("light_rubble")
+    debris = world.obstacles[15]  # 1.5 cm debris in the open
+    assert debris.climbable
+    r = RobotModelConfig().bumper_radius
+
+    def drift(x: float, y: float) -> float:
+        robot = SimRobot(replace(world, robot_start=(x, y, 0.0)))
+        robot.step(1.0)
+        p = robot.pose()
+        return float(np.hypot(p.x - x, p.y - y))
+
+    on = (debris.center[0] + 0.1, debris.center[1])
+    off = (debris.center[0] + 0.45, debris.center[1])
+    assert _footprint_distance(debris, *on) < r < _footprint_distance(debris, *off)
+    assert drift(*on) > 0.02 and drift(*off) < 0.005
+
+
 @pytest.fixture(scope="module")
 def recording(tmp_path_factory):
     p = tmp_path_factory.mktemp("rec") / "r.wav"
