@@ -6,6 +6,7 @@ from __future__ import annotations
 
 import json
 import os
+import signal
 import socket
 import subprocess
 import sys
@@ -135,3 +136,30 @@ def test_cli_run_finishes_and_writes_results_without_a_viewer(tmp_path, how):
         assert (out / "rescue.rrd").stat().st_size > 0 and result["rerun_file"] == str(out / "rescue.rrd")
     else:  # connected to the "viewer"; abandoned at the end
         assert "did not take the end of the recording" in p.stderr and "rerun_file" not in result
+
+
+@pytest.mark.parametrize("delay_s", [0.0, 1.5])
+def test_ctrl_c_ends_a_run_with_a_stalled_viewer(tmp_path, delay_s):
+    """The issue's run ignored Ctrl-C while blocked in the viewer flush; now it exits 130 within the viewer
+    timeout (3 s flush + rerun's 5 s disconnect grace)."""
+    peer = _Peer(settings=True)
+    out = tmp_path / "run"
+    env = dict(os.environ, PYTHONPATH=str(SRC))
+    p = subprocess.Popen([sys.executable, "-m", "ssl_sim.cli", "run", "light_rubble_three", "-q", "--time-limit",
+                          "120", "--rerun", f"connect:127.0.0.1:{peer.port}", "--out", str(out)],
+                         env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        deadline = time.monotonic() + 60
+        while not out.exists() and time.monotonic() < deadline:  # --out is created inside main's error handling
+            time.sleep(0.1)
+        time.sleep(delay_s)  # while setting up / while simulating
+        t0 = time.perf_counter()
+        p.send_signal(signal.SIGINT)
+        _, err = p.communicate(timeout=60)
+        print(f"exited {time.perf_counter() - t0:.1f} s after SIGINT")
+    finally:
+        p.kill()
+        peer.close()
+    assert p.returncode == 130, err
+    assert err.strip().splitlines()[-1] == "ssl-rescue: interrupted"

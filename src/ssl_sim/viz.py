@@ -25,6 +25,7 @@ Entities (world frame unless said otherwise; all lengths m)::
 """
 from __future__ import annotations
 
+import atexit
 import logging
 import math
 import os
@@ -175,6 +176,12 @@ class RerunLogger(RunLogger):
             raise ViewerUnavailable(problem)
         self.rec = rr.RecordingStream(application_id, recording_id=uuid.uuid4())
         self.path: Path | None = None
+        self._closed = False
+        if self.mode != "save":
+            # rerun's own exit handler flushes without a timeout: a viewer that stops answering would hang the
+            # exit (also after Ctrl-C, before close() ran); ours is bounded.
+            rr.unregister_shutdown()
+            atexit.register(self.close)
         try:
             if self.mode == "save":
                 self.path = Path(arg)
@@ -300,9 +307,12 @@ class RerunLogger(RunLogger):
         """Flush and disconnect. A file is waited for; a viewer gets ``timeout_s`` for the flush plus rerun's own
         5 s disconnect grace, then is abandoned with a warning (rerun 0.41 would block forever on a viewer that
         stopped answering, also at interpreter exit)."""
+        if self._closed:
+            return
         if self.mode == "save":
             self.rec.flush()
             self.rec.disconnect()
+            self._closed = True
             return
         problems: list[str] = []
 
@@ -316,9 +326,9 @@ class RerunLogger(RunLogger):
         worker = threading.Thread(target=finish, name="rerun-close", daemon=True)
         worker.start()
         worker.join(self.timeout_s + _RERUN_DISCONNECT_GRACE_S + 1.0)
+        self._closed = True
         if worker.is_alive():
             problems.append("it stopped answering")
-            self.rr.unregister_shutdown()  # rerun's exit handler would wait for it forever
         if problems:
             log.warning("rerun viewer did not take the end of the recording (%s); its view is incomplete",
                         "; ".join(problems))
