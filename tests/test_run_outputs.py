@@ -115,6 +115,7 @@ class _Peer:
         self.sock.close()
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("how", ["connect_closed", "spawn_no_display", "connect_silent_peer", "connect_stalled"])
 def test_cli_run_finishes_and_writes_results_without_a_viewer(tmp_path, how):
     """The whole CLI in a subprocess (as a user runs it). Wall time is printed, not asserted (the machine
@@ -138,6 +139,7 @@ def test_cli_run_finishes_and_writes_results_without_a_viewer(tmp_path, how):
         assert "did not take the end of the recording" in p.stderr and "rerun_file" not in result
 
 
+@pytest.mark.slow
 @pytest.mark.parametrize("delay_s", [0.0, 1.5])
 def test_ctrl_c_ends_a_run_with_a_stalled_viewer(tmp_path, delay_s):
     """The issue's run ignored Ctrl-C while blocked in the viewer flush; now it exits 130 within the viewer
