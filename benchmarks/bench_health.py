@@ -19,10 +19,9 @@ import time  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
-import pyroomacoustics as pra  # noqa: E402
 
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
-from signals import speech_like  # noqa: E402
+from signals import room_talker  # noqa: E402
 
 from ssl_core.geometry import cube8  # noqa: E402
 from ssl_core.grid import direction_from_angles  # noqa: E402
@@ -31,21 +30,6 @@ from ssl_core.localizer import Localizer, LocalizerConfig  # noqa: E402
 
 FS = 16000
 BLOCK = FS // 10
-
-
-def recording(seconds: float, seed: int) -> np.ndarray:
-    g = cube8()
-    room_dim = np.array([6.0, 5.0, 3.0])
-    e_abs, max_order = pra.inverse_sabine(0.4, room_dim)
-    centre = np.array([2.6, 2.2, 1.2])
-    room = pra.ShoeBox(room_dim, fs=FS, materials=pra.Material(e_abs), max_order=min(max_order, 12))
-    n = int(seconds * FS)
-    room.add_source(centre + 1.5 * direction_from_angles(0.5, 0.2), signal=speech_like(n, FS, seed=seed))
-    room.add_microphone_array((centre + g.positions).T)
-    room.simulate()
-    x = room.mic_array.signals[:, :n]
-    x = 0.1 * x / np.sqrt(np.mean(x**2))
-    return x + np.random.default_rng(seed).standard_normal(x.shape) * 0.01
 
 
 def cpu_ms_per_s(feed, x: np.ndarray) -> float:
@@ -59,7 +43,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--seconds", type=float, default=10.0)
     a = ap.parse_args()
-    x = recording(a.seconds, seed=1)
+    x = room_talker(cube8().positions, direction_from_angles(0.5, 0.2), a.seconds, FS, seed=1)
     healthy = cpu_ms_per_s(MicHealth(cube8(), devices=[0] * 4 + [1] * 4).update, x)
     swapped = cpu_ms_per_s(MicHealth(cube8(), devices=[0] * 4 + [1] * 4).update, x[[0, 1, 2, 6, 4, 5, 3, 7]])
     loc = cpu_ms_per_s(Localizer(cube8(), LocalizerConfig()).process, x)
