@@ -259,7 +259,7 @@ class Localizer:
 
     _pair_weights: np.ndarray | None = None  # None: every pair counts (see exclude_channels)
 
-    def exclude_channels(self, channels) -> None:
+    def exclude_channels(self, channels: list[int] | tuple[int, ...]) -> None:
         """Leave every pair of ``channels`` (faulty microphones, e.g. ``ssl_core.health``'s ``excluded``) out
         of the SRP sum from the next window on; the others are scaled so that 1 stays perfectly coherent."""
         bad = np.isin(self.pairs, np.asarray(channels, int)).any(axis=1)

@@ -35,8 +35,8 @@ import sys
 import threading
 import uuid
 from pathlib import Path
-from urllib.parse import urlsplit
 from typing import Any, Sequence
+from urllib.parse import urlsplit
 
 import numpy as np
 
