@@ -46,6 +46,9 @@ FAULTS = {
     "saturated": (lambda x: _with(x, 2, np.clip(30 * x[2], -1, 1)), "saturated", (2,)),
     "stuck": (lambda x: _with(x, 5, np.full(x.shape[1], 0.02)), "stuck", (5,)),
     "polarity": (lambda x: _with(x, 1, -x[1]), "polarity", (1,)),
+    # a loose connection: the channel carries its own noise at the talker's level, nothing of the talker
+    "incoherent": (lambda x: _with(x, 6, x[6].std() * np.random.default_rng(3).standard_normal(x.shape[1])),
+                   "incoherent", (6,)),
     "swapped": (lambda x: x[[0, 1, 2, 6, 4, 5, 3, 7]], "swapped", (3, 6)),
     # identical (electrical) noise on every channel, 6 dB under the talker
     "common_mode": (lambda x: x + 0.05 * np.random.default_rng(2).standard_normal(x.shape[1]), "common_mode", tuple(range(8))),
