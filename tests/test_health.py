@@ -81,6 +81,12 @@ def test_healthy_array_and_sensor_noise_raise_nothing(talkers):
         assert all(not r.faults for r in _stream(x))
     noise = 1e-3 * np.random.default_rng(4).standard_normal((8, 3 * FS))  # no sound: nothing to judge delays by
     assert all(not r.faults for r in _stream(noise))
+    # Diffuse noise (30 uncorrelated plane waves from random directions): partly coherent, no single source.
+    rng = np.random.default_rng(7)
+    dirs = rng.standard_normal((30, 3))
+    diffuse = sum(plane_wave(G.positions, d / np.linalg.norm(d), rng.standard_normal(3 * FS), FS) for d in dirs)
+    diffuse = 0.01 * diffuse / diffuse.std() + 1e-3 * rng.standard_normal(diffuse.shape)
+    assert all(not r.faults for r in _stream(diffuse))
 
 
 def test_fault_clears_when_the_channel_recovers(talkers):
