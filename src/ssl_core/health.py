@@ -46,21 +46,25 @@ class HealthConfig:
     frame_size: int = 512
     band_hz: tuple[float, float] = (300.0, 4000.0)  # where a 15 cm cube's pairs are coherent for a voice
     min_level_dbfs: float = -70.0    # median band level needed to judge coherence, polarity, delays
-    dead_db: float = 30.0            # dead: this far below the median channel
+    dead_db: float = 30.0            # dead: this far below the median channel (healthy spread: a few dB;
+                                     # an open input: -76 dB)
     clip_level: float = 0.99         # |x| at or above this (full scale 1) counts as clipped
-    clip_fraction: float = 0.01      # saturated: more clipped samples than this
+    clip_fraction: float = 0.01      # saturated: more clipped samples than this (30x gain: 54-57 %)
     stuck_ac_db: float = 40.0        # stuck: AC level this far below the median, with a DC value ...
     stuck_dc: float = 1e-3           # ... of at least this (full scale 1)
     min_coherence: float = 0.08      # the array's median pair coherence needed to judge a channel or the delays
                                      # (sensor noise: 0.017, diffuse noise 0.11-0.12, talkers at SNR 10 dB: 0.14)
     incoherent_ratio: float = 0.35   # incoherent: channel's median coherence below this x the array's
-    polarity_fraction: float = 0.7   # polarity: this fraction of a channel's pairs peak negative
+                                     # (healthy channels within 10 % of each other; own noise: ~0.02)
+    polarity_fraction: float = 0.7   # polarity: this fraction of a channel's pairs peak negative (inverted: 7/7)
     max_fit_residual_s: float = 25e-6  # a plane-wave fit this good is "consistent with the geometry"
-    swap_gain: float = 3.0           # swapped: exchanging two channels cuts the misfit this many times
+                                       # (healthy: 9-14 us; 1-sample slip 27-34 us, a swap 40-200 us)
+    swap_gain: float = 3.0           # swapped: exchanging two channels cuts the misfit this many times (7-18x)
     slip_samples: float = 0.5        # device_slip: fitted offset at least this (samples) ...
     slip_gain: float = 1.8           # ... and the offset cuts the misfit this many times (1 sample: 2.3-3.6x)
     max_slip_samples: int = 8        # delays searched beyond the geometric range (samples)
-    common_mode_peak: float = 0.25   # common_mode: every pair's GCC-PHAT at lag 0 at least this
+    common_mode_peak: float = 0.25   # common_mode: every pair's GCC-PHAT at lag 0 at least this (noise 6 dB
+                                     # under the talker: 0.47-0.52; a real source leaves some pairs near 0)
     sound_speed: float = SOUND_SPEED
 
     def __post_init__(self) -> None:
