@@ -82,3 +82,35 @@ def test_simulated_run_logs_the_fault_to_rerun_and_results():
     assert faults and faults[0][1].startswith(f"microphone fault: dead mic {DEAD}") and faults[0][2] == "WARN"
     assert result["microphone_faults"][0]["kind"] == "dead" and result["microphone_faults"][0]["channels"] == [DEAD]
     assert run.localizer._loc._pair_weights is not None  # mic 3's pairs left the SRP sum
+
+
+def test_a_one_sample_device_slip_is_seen_by_the_monitor_and_resynced():
+    """Two-device capture whose device B slips by one sample 2 s in, with scheduled tracking off: the health
+    monitor names the slip and the capture re-measures its offset at once; the fault then clears."""
+    from test_audio_capture import _devices, _FakeSD, _plane_wave, _unit
+
+    from robot.hardware.audio import ArrayCapture
+    from robot.monitored_audio import MonitoredAudio
+    from ssl_core.health import MicHealth
+
+    g = cube8()
+    truth = 0.3 * _plane_wave(_unit(35, 15), 6 * FS, seed=12) / 4
+    before, after = _devices(truth, 300), _devices(truth, 301)
+    at = 2 * FS
+    cap = ArrayCapture((1, 2), FS, positions=g.positions, blocksize=512, track_every_s=None,
+                       backend=_FakeSD([before[0], np.concatenate([before[1][:, :at], after[1][:, at:]], axis=1)],
+                                       pace=0.15))
+    cap.merger.set_offset(300)
+    seen = []
+    audio = MonitoredAudio(cap, MicHealth(g, devices=[0] * 4 + [1] * 4),
+                           on_change=lambda t, new, cleared: seen.extend((t, f.kind, f.value) for f in new))
+    fixed_at = None
+    while cap.merger.cursor < 5 * FS:
+        audio.read(1024)
+        if fixed_at is None and cap.merger.offset == 301:
+            fixed_at = cap.merger.cursor
+    cap.close()
+    slips = [(t, v) for t, kind, v in seen if kind == "device_slip"]
+    assert len(slips) == 1 and slips[0][1] == pytest.approx(1.0, abs=0.4)
+    assert fixed_at is not None and fixed_at - (at - 300) <= 2 * FS  # within 2 s of audio after the slip
+    assert not audio.report.faults                                     # and the fault has cleared

@@ -2,8 +2,9 @@
 
 Every block read is fed to a ``MicHealth`` monitor; when the confirmed faults change, each new fault is
 logged as a warning (the robot log), each cleared one as info, the localizer's excluded channels are
-updated (``Localizer.exclude_channels``: a faulty microphone's pairs leave the SRP sum automatically),
-and ``on_change(time, new, cleared)`` is called (the CLI prints, the simulator logs to rerun).
+updated (``Localizer.exclude_channels``: a faulty microphone's pairs leave the SRP sum automatically), a
+``device_slip`` makes the source re-measure its devices' alignment (``AudioSource.resync``), and
+``on_change(time, new, cleared)`` is called (the CLI prints, the simulator logs to rerun).
 """
 from __future__ import annotations
 
@@ -78,11 +79,16 @@ class MonitoredAudio(AudioSource):
                     log.warning("localizing without microphone(s) %s", list(report.excluded))
                 else:
                     log.info("localizing with all microphones again")
+        if any(f.kind == "device_slip" for f in new):
+            self.source.resync()  # two-device capture: re-measure the offset now, not at the next scheduled track
         if (new or cleared) and self.on_change is not None:
             self.on_change(time, new, cleared)
 
     def flush(self) -> None:
         self.source.flush()
+
+    def resync(self) -> None:
+        self.source.resync()
 
     def close(self) -> None:
         self.source.close()

@@ -517,6 +517,16 @@ class ArrayCapture(AudioSource):
                 log.debug("offset tracking skipped: %s", exc)
         return AudioBlock(out, self._rate, t)
 
+    def resync(self) -> None:
+        """Track the devices' offset now rather than on schedule (e.g. the health monitor saw a slip)."""
+        if self.merger.positions is None:
+            return
+        try:
+            self.merger.track(window_s=0.5, search_s=0.002)
+            self._since_track = 0
+        except ValueError as exc:
+            log.debug("offset re-sync skipped: %s", exc)
+
     def _get(self, d: int):
         try:
             return self._queues[d].get(timeout=self.timeout_s)
