@@ -49,6 +49,7 @@ import numpy as np
 from robot.hal import AudioSource, Clock, DriveBase, DriveStatus, as_float_audio
 from robot.kinematics import OmniDriveParams
 from robot.odometry import Odometry, wrap_angle
+from robot.protocol import FAULT_NAMES
 from robot.voice import beamform, voice_likeness
 
 log = logging.getLogger(__name__)
@@ -136,6 +137,9 @@ class RescueConfig:
             raise ValueError(f"RescueConfig.voice_threshold: expected 0..1, got {self.voice_threshold}")
         if self.min_step_m > self.step_m:
             raise ValueError(f"RescueConfig.min_step_m: expected <= step_m = {self.step_m}, got {self.min_step_m}")
+        if not (isinstance(self.fatal_faults, tuple) and set(self.fatal_faults) <= set(FAULT_NAMES.values())):
+            raise ValueError(f"RescueConfig.fatal_faults: expected drive fault names out of "
+                             f"{sorted(FAULT_NAMES.values())} (an empty list for none), got {self.fatal_faults!r}")
         if self.max_recoveries < 1 or self.explore_after_silent < 1:
             raise ValueError("RescueConfig.max_recoveries / explore_after_silent: expected >= 1")
         if self.max_victims is not None and self.max_victims < 1:

@@ -329,6 +329,20 @@ class Localizer:
             level = 10 * np.log10(ms / _FULL_SCALE_SINE_MS)
         return level >= self.config.min_level_dbfs
 
+    _pair_weights: np.ndarray | None = None  # None: every pair counts (see exclude_channels)
+
+    def exclude_channels(self, channels: list[int] | tuple[int, ...]) -> None:
+        """Leave every pair of ``channels`` (faulty microphones, e.g. ``ssl_core.health``'s ``excluded``) out
+        of the SRP sum from the next window on; the others are scaled so that 1 stays perfectly coherent."""
+        bad = np.isin(self.pairs, np.asarray(channels, int)).any(axis=1)
+        if bad.all():
+            raise ValueError(f"exclude_channels: excluding {list(channels)} leaves no microphone pair")
+        self._pair_weights = None if not bad.any() else np.where(bad, 0.0, len(bad) / (~bad).sum())
+
+    def _pairs_in_use(self) -> int:
+        """Pairs that enter the SRP (all unless channels are excluded): the P of the significance scale."""
+        return len(self.pairs) if self._pair_weights is None else int(np.count_nonzero(self._pair_weights))
+
     def _windows(self, blocks: Iterable, fs: int | None, st: _Stream) -> Iterator[LocalizationResult]:
         """Every window of consecutive ``blocks`` on stream ``st``, the frames after the last full
         window ending a short last one."""
@@ -373,6 +387,8 @@ class Localizer:
         if w_sum <= 0:  # every bin suppressed: no evidence at all
             return np.zeros((len(self.pairs), self._lag_axis.size), np.float32), 0.0, 0.0
         cross = summed_phat_cross_spectra(spec, self.pairs, weights)
+        if self._pair_weights is not None:
+            cross = cross * self._pair_weights[:, None].astype(cross.real.dtype)
         return self._lag_steering(cross * (n_bins / w_sum)), w_sum, w_sum**2 / w_sq
 
     def _bin_weights(self, spec: np.ndarray, floor: NoiseFloor | None) -> np.ndarray | None:
@@ -411,7 +427,7 @@ class Localizer:
         """
         cfg = self.config
         cos_sep = np.cos(np.deg2rad(cfg.min_separation_deg))
-        z_scale = np.sqrt(max(n_eff, 0.0) * self._fine.n_pairs)
+        z_scale = np.sqrt(max(n_eff, 0.0) * self._pairs_in_use())
         work = gcc
         peaks: list[tuple[float, int, float]] = []
         srp_map = None
