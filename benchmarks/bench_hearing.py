@@ -10,7 +10,8 @@ Directions are drawn per trial (seeded).
 Rows:
 - ``engine/window``: ssl_core per 128 ms window (n_sources = number of talkers), significance test;
 - ``engine+NS/window``: the same with noise suppression;
-- ``engine+track``: confirmed tracks of ssl_core.tracking.Tracker per window (when the module exists);
+- ``engine+track``: confirmed tracks of ssl_core.tracking.Tracker per window, detections at the tracking
+  gate (``TRACKING_MIN_SIGNIFICANCE``); ``engine+NS+track`` with noise suppression;
 - ``whole recording``: ``Localizer.locate`` (what ``ssl-locate REC.wav`` prints), one answer per trial;
   ``+NS`` with noise suppression (``ssl-locate --noise-suppression``);
 - ``pra SRP`` / ``pra NormMUSIC``: pyroomacoustics on the first windows of each trial (they are slow),
@@ -137,7 +138,12 @@ def _tracker_class():
 def run_engine(trials, k: int, noise_suppression=False, track=False) -> dict:
     from ssl_core.localizer import Localizer, LocalizerConfig
 
-    loc = Localizer("cube8", LocalizerConfig(n_sources=k, noise_suppression=noise_suppression))
+    cfg = LocalizerConfig(n_sources=k, noise_suppression=noise_suppression)
+    if track:  # the gate the tracker is tuned for
+        from ssl_core.tracking import TRACKING_MIN_SIGNIFICANCE
+        cfg = LocalizerConfig(n_sources=k, noise_suppression=noise_suppression,
+                              min_significance=TRACKING_MIN_SIGNIFICANCE)
+    loc = Localizer("cube8", cfg)
     tally = _Tally()
     Tracker = _tracker_class()
     for x, truths in trials:
@@ -196,9 +202,13 @@ def cpu_child(seconds: float, pin: bool) -> dict:
         L._BLAS = False  # disable the one-thread pin: what numpy's default thread pool costs
     lab = Lab(duration_s=seconds)
     x = build_sim(lab, [Truth(40.0, 10.0, 1.5)], 1).listen_pose(lab.pose, seconds, mount=lab.mount)
-    loc = L.Localizer("cube8", L.LocalizerConfig())
     Tracker = _tracker_class()
     tracker = Tracker() if Tracker else None
+    cfg = L.LocalizerConfig()
+    if tracker is not None:
+        from ssl_core.tracking import TRACKING_MIN_SIGNIFICANCE
+        cfg = L.LocalizerConfig(min_significance=TRACKING_MIN_SIGNIFICANCE)
+    loc = L.Localizer("cube8", cfg)
     loc.process(x[:, :FS])  # warm-up
     loc.reset()
     t0 = time.process_time()

@@ -84,3 +84,31 @@ def test_paper_three_sources_within_5_degrees(tmp_path, capsys):
     dets = _cli(tmp_path, capsys, x, "--sources", "3")
     assert len(dets) == 3
     assert max(_errors(dets, truths)) <= 5.0, dets
+
+
+def test_track_and_odas_formats(tmp_path, capsys):
+    truth = Truth(60.0, 10.0, 1.5)
+    x = _recording((truth,), 5, duration_s=4.0, rt60_s=0.5)
+    path = tmp_path / "rec.wav"
+    wavfile.write(path, FS, x.T)
+    capsys.readouterr()
+    # --track --format odas: ODAS SST lines, one per window, a confirmed track on the talker
+    assert main([str(path), "--track", "--format", "odas"]) == 0
+    lines = [json.loads(s) for s in capsys.readouterr().out.splitlines()]
+    assert [m["timeStamp"] for m in lines] == list(range(len(lines))) and len(lines) >= 25
+    last = lines[-1]["src"]
+    assert len(last) == 1 and set(last[0]) == {"id", "tag", "x", "y", "z", "activity"}
+    u = np.array([last[0]["x"], last[0]["y"], last[0]["z"]])
+    assert last[0]["id"] == 1 and last[0]["tag"] == "dynamic" and 0 <= last[0]["activity"] <= 1
+    assert np.rad2deg(np.arccos(np.clip(u @ truth.direction / np.linalg.norm(u), -1, 1))) <= 5.0
+    # --stream --format odas: ODAS SSL lines with the detections' power as E
+    assert main([str(path), "--stream", "--format", "odas"]) == 0
+    pots = [json.loads(s) for s in capsys.readouterr().out.splitlines()]
+    assert len(pots) == len(lines) and any(p["src"] for p in pots)
+    assert all(set(e) == {"x", "y", "z", "E"} for p in pots for e in p["src"])
+    # --track as a table and as JSON
+    assert main([str(path), "--track"]) == 0
+    assert "activity" in capsys.readouterr().out
+    assert main([str(path), "--track", "--json"]) == 0
+    tracks = json.loads(capsys.readouterr().out)["windows"][-1]["tracks"]
+    assert tracks[0]["id"] == 1 and abs(tracks[0]["azimuth_deg"] - 60.0) <= 5.0

@@ -1,7 +1,9 @@
 """``ssl-locate REC.wav --array cube8 [--sources 3]``: localize the sources in a multichannel WAV.
 
 Default: one whole-recording answer (every source the 128 ms windows find consistently, strongest
-first). ``--stream``: every window's detections; ``--track``: tracks over the windows.
+first). ``--stream``: every window's detections; ``--track``: the confirmed tracks
+(``ssl_core.tracking.Tracker``) after every window, fed with detections at the tracking gate
+``TRACKING_MIN_SIGNIFICANCE``.
 The file is read in blocks, so memory stays bounded whatever its length.
 
 Exit codes: 0 done (also when no source was found: stderr says so); 1 no source found and
@@ -22,8 +24,10 @@ import json
 import sys
 from dataclasses import replace
 
+from ssl_core.detection import Detection
 from ssl_core.geometry import get_array
 from ssl_core.localizer import Localizer, LocalizerConfig
+from ssl_core.tracking import TRACKING_MIN_SIGNIFICANCE, Track, Tracker
 from ssl_core.wav_blocks import read_blocks, wav_info
 
 EXIT_OK, EXIT_NO_SOURCE, EXIT_BAD_INPUT = 0, 1, 2
@@ -84,6 +88,8 @@ def _localizer(args, fs: int) -> Localizer:
                       coarse_resolution_deg=max(args.resolution, min(4.0, args.min_separation / 2)),
                       band_hz=tuple(args.band), radius_m=args.radius, noise_suppression=args.noise_suppression,
                       min_separation_deg=args.min_separation, window_frames=args.window)
+        if args.track:  # the tracker's confirmation is the false-alarm control: the looser gate it is tuned for
+            cfg = replace(cfg, min_significance=TRACKING_MIN_SIGNIFICANCE)
         return Localizer(geometry, cfg)
     except ValueError as exc:
         raise _BadInput(str(exc))
@@ -99,84 +105,81 @@ def _blocks(info, loc: Localizer):
     return read_blocks(info, max(loc.config.frame_size, int(_BLOCK_S * info.fs)))
 
 
-def _vec(u) -> dict:
-    return {"x": round(float(u[0]), 4), "y": round(float(u[1]), 4), "z": round(float(u[2]), 4)}
-
-
 def _run(args) -> int:
     fmt = "json" if args.json else args.format
     info = _open(args.wav)
     loc = _localizer(args, info.fs)
     blocks = _blocks(info, loc)
-    out = sys.stdout
-    found = False
-    if not (args.stream or args.track):
-        try:
-            result = loc.locate_blocks(blocks)
-        except ValueError as exc:
-            raise _BadInput(f"{info.path}: {exc}")
-        found = bool(result.detections)
-        if fmt == "json":
-            print(json.dumps({"file": args.wav, "fs": info.fs, "array": loc.geometry.name, "windows": [
-                {"time_s": round(result.time, 4), "detections": [d.to_dict() for d in result.detections]}]}), file=out)
-        elif fmt == "odas":
-            print(json.dumps({"timeStamp": 0, "src": [{**_vec(d.direction), "E": round(d.power, 4)}
-                                                      for d in result.detections]}), file=out)
-        else:
-            _table_header(args, info, loc)
-            _table_rows(result.time, result.detections)
-    else:
-        tracker = _tracker() if args.track else None
-        windows = []
-        if fmt == "table":
-            _table_header(args, info, loc, tracks=tracker is not None)
-        k = 0
-        for block in blocks:
-            try:
-                results = loc.process(block)
-            except ValueError as exc:
-                raise _BadInput(f"{info.path}: {exc}")
-            for r in results:
-                if tracker is not None:
-                    items = tracker.update(r.detections, r.time)
-                else:
-                    items = r.detections
-                found = found or bool(items)
-                if fmt == "json":
-                    key = "tracks" if tracker is not None else "detections"
-                    windows.append({"time_s": round(r.time, 4), key: [_item_dict(i) for i in items]})
-                elif fmt == "odas":
-                    src = ([{"id": t.id, "tag": "dynamic", **_vec(t.direction), "activity": round(t.activity, 3)}
-                            for t in items] if tracker is not None else
-                           [{**_vec(d.direction), "E": round(d.power, 4)} for d in items])
-                    print(json.dumps({"timeStamp": k, "src": src}), file=out)
-                elif tracker is not None:
-                    _track_rows(r.time, items)
-                else:
-                    _table_rows(r.time, items)
-                k += 1
-        if fmt == "json":
-            print(json.dumps({"file": args.wav, "fs": info.fs, "array": loc.geometry.name, "windows": windows}),
-                  file=out)
+    try:
+        found = (_per_window if args.stream or args.track else _whole)(args, fmt, info, loc, blocks)
+    except ValueError as exc:  # bad samples found while reading (NaN in a float WAV)
+        raise _BadInput(f"{info.path}: {exc}")
     if not found:
         print(f"ssl-locate: {args.wav}: no source detected (no peak passed the significance test)", file=sys.stderr)
         return EXIT_NO_SOURCE if args.require_source else EXIT_OK
     return EXIT_OK
 
 
-def _tracker():
-    try:
-        from ssl_core.tracking import Tracker
-    except ImportError as exc:  # the tracker is a separate module of ssl_core
-        raise _BadInput(f"--track: tracking is not available ({exc})")
-    return Tracker()
+def _whole(args, fmt: str, info, loc: Localizer, blocks) -> bool:
+    """The whole-recording answer; returns whether it holds a source."""
+    result = loc.locate_blocks(blocks)
+    if fmt == "json":
+        print(json.dumps({"file": args.wav, "fs": info.fs, "array": loc.geometry.name, "windows": [
+            {"time_s": round(result.time, 4), "detections": [d.to_dict() for d in result.detections]}]}))
+    elif fmt == "odas":
+        print(json.dumps({"timeStamp": 0, "src": [_odas_pot(d) for d in result.detections]}))
+    else:
+        _table_header(args, info, loc)
+        _table_rows(result.time, result.detections)
+    return bool(result.detections)
 
 
-def _item_dict(item) -> dict:
-    if hasattr(item, "to_dict"):
-        return item.to_dict()
-    return {"id": item.id, "azimuth_deg": round(item.azimuth_deg, 3), "elevation_deg": round(item.elevation_deg, 3),
-            "activity": round(item.activity, 3), "power": round(item.power, 5), "level_db": round(item.level_db, 2)}
+def _per_window(args, fmt: str, info, loc: Localizer, blocks) -> bool:
+    """Detections (``--stream``) or confirmed tracks (``--track``) after every window, printed as they come
+    (JSON: collected into one object at the end); returns whether any window had one."""
+    tracker = Tracker() if args.track else None
+    windows, found, k = [], False, 0
+    if fmt == "table":
+        _table_header(args, info, loc, tracks=tracker is not None)
+    for block in blocks:
+        for r in loc.process(block):
+            items = tracker.update(r.detections, r.time) if tracker is not None else r.detections
+            found = found or bool(items)
+            if tracker is not None:
+                if fmt == "json":
+                    windows.append({"time_s": round(r.time, 4), "tracks": [_track_dict(t) for t in items]})
+                elif fmt == "odas":
+                    print(json.dumps({"timeStamp": k, "src": [_odas_track(t) for t in items]}))
+                else:
+                    _track_rows(r.time, items)
+            elif fmt == "json":
+                windows.append({"time_s": round(r.time, 4), "detections": [d.to_dict() for d in items]})
+            elif fmt == "odas":
+                print(json.dumps({"timeStamp": k, "src": [_odas_pot(d) for d in items]}))
+            else:
+                _table_rows(r.time, items)
+            k += 1
+    if fmt == "json":
+        print(json.dumps({"file": args.wav, "fs": info.fs, "array": loc.geometry.name, "windows": windows}))
+    return found
+
+
+def _odas_pot(d: Detection) -> dict:
+    """ODAS SSL (``snk_pots``) entry: unit vector, array frame, and the SRP power as the energy ``E``."""
+    u = d.direction
+    return {"x": round(float(u[0]), 4), "y": round(float(u[1]), 4), "z": round(float(u[2]), 4), "E": round(d.power, 4)}
+
+
+def _odas_track(t: Track) -> dict:
+    """ODAS SST (``snk_tracks``) entry: id, tag, unit vector (array frame), activity probability."""
+    u = t.direction
+    return {"id": t.id, "tag": "dynamic", "x": round(float(u[0]), 4), "y": round(float(u[1]), 4),
+            "z": round(float(u[2]), 4), "activity": round(t.activity, 3)}
+
+
+def _track_dict(t: Track) -> dict:
+    return {"id": t.id, "azimuth_deg": round(t.azimuth_deg, 3), "elevation_deg": round(t.elevation_deg, 3),
+            "activity": round(t.activity, 3), "power": round(t.power, 5), "level_db": round(t.level_db, 2)}
 
 
 def _table_header(args, info, loc, tracks: bool = False) -> None:
