@@ -47,7 +47,9 @@ def test_cli_bad_inputs_are_one_line_errors_with_exit_code_2(tmp_path, capsys):
     not_wav.write_text("hello")
     cases = [([str(tmp_path)], "is a directory"), ([str(tmp_path / "missing.wav")], "no such file"),
              ([str(not_wav)], "not a WAV"), ([good, "--array", str(tmp_path)], "--array"),
-             ([good, "--sources", "0"], "--sources"), ([good, "--resolution", "0.05"], "MB")]
+             ([good, "--sources", "0"], "--sources"), ([good, "--resolution", "0.05"], "MB"),
+             ([good, "--band", "3000", "300"], "--band 3000 300"),
+             ([good, "--sources", "2", "--min-separation", "2"], "--min-separation 2")]
     if os.access(unreadable, os.R_OK):  # running as root: permissions do not apply
         cases = [c for c in cases if "locked" not in c[0][0]]
     else:

@@ -21,6 +21,7 @@ from __future__ import annotations
 
 import argparse
 import json
+import re
 import sys
 from dataclasses import replace
 
@@ -92,7 +93,27 @@ def _localizer(args, fs: int) -> Localizer:
             cfg = replace(cfg, min_significance=TRACKING_MIN_SIGNIFICANCE)
         return Localizer(geometry, cfg)
     except ValueError as exc:
-        raise _BadInput(str(exc))
+        raise _BadInput(_with_option(args, str(exc)))
+
+
+# The option that sets each LocalizerConfig field an error can name.
+_OPTION_OF_FIELD = {"resolution_deg": "--resolution", "coarse_resolution_deg": "--resolution", "band_hz": "--band",
+                    "window_frames": "--window", "radius_m": "--radius", "min_separation_deg": "--min-separation",
+                    "n_sources": "--sources"}
+
+
+def _with_option(args, message: str) -> str:
+    """``message`` prefixed with the command-line option (and its value) behind the field it names."""
+    m = re.match(r"LocalizerConfig\.(\w+)=", message)
+    field = m.group(1) if m else next((f for f in ("band_hz", "radius") if f in message), None)
+    option = _OPTION_OF_FIELD.get("radius_m" if field == "radius" else field)
+    if option is None:
+        return message
+    return f"{option} {_shown(getattr(args, option[2:].replace('-', '_')))}: {message}"
+
+
+def _shown(value) -> str:
+    return " ".join(f"{v:g}" for v in value) if isinstance(value, (tuple, list)) else f"{value:g}"
 
 
 def _blocks(info, loc: Localizer):
