@@ -75,33 +75,30 @@ def wav_info(path: str | Path) -> WavInfo:
 
 
 def read_blocks(info: WavInfo, block_frames: int) -> Iterator[np.ndarray]:
-    """Consecutive blocks (channels, <= block_frames) as float32 in [-1, 1) (int) or as stored (float)."""
+    """Consecutive blocks (channels, <= block_frames) as float32 (integers scaled to [-1, 1))."""
     if block_frames < 1:
         raise ValueError(f"block_frames: expected >= 1, got {block_frames}")
-    width = info.bits // 8
-    dtype = {(False, 8): np.uint8, (False, 16): "<i2", (False, 32): "<i4", (True, 32): "<f4", (True, 64): "<f8",
-             (False, 24): np.uint8}[(info.is_float, info.bits)]
+    frame_bytes = info.channels * info.bits // 8
     with open(info.path, "rb") as f:
         f.seek(info.data_offset)
         left = info.n_frames
         while left > 0:
-            n = min(block_frames, left)
-            count = n * info.channels * (3 if info.bits == 24 else 1)
-            raw = np.fromfile(f, dtype=dtype, count=count)
-            n = raw.size // (info.channels * (3 if info.bits == 24 else 1))
+            raw = f.read(min(block_frames, left) * frame_bytes)
+            n = len(raw) // frame_bytes
             if n == 0:
                 return
             left -= n
-            yield _to_float(raw[: n * info.channels * (width if info.bits == 24 else 1)], info).reshape(n, info.channels).T
+            yield _to_float(raw[: n * frame_bytes], info).reshape(n, info.channels).T
 
 
-def _to_float(raw: np.ndarray, info: WavInfo) -> np.ndarray:
+def _to_float(raw: bytes, info: WavInfo) -> np.ndarray:
+    """Interleaved little-endian samples -> float32, integers scaled to [-1, 1)."""
     if info.is_float:
-        return raw.astype(np.float32)
+        return np.frombuffer(raw, "<f4" if info.bits == 32 else "<f8").astype(np.float32)
     if info.bits == 8:  # 8-bit WAV is unsigned
-        return (raw.astype(np.float32) - 128.0) / 128.0
+        return (np.frombuffer(raw, np.uint8).astype(np.float32) - 128.0) / 128.0
     if info.bits == 24:
-        b = raw.reshape(-1, 3).astype(np.int32)
+        b = np.frombuffer(raw, np.uint8).reshape(-1, 3).astype(np.int32)
         v = b[:, 0] | (b[:, 1] << 8) | (b[:, 2] << 16)
-        return (np.where(v >= 1 << 23, v - (1 << 24), v).astype(np.float32)) / np.float32(1 << 23)
-    return raw.astype(np.float32) / np.float32(2.0 ** (info.bits - 1))
+        return np.where(v >= 1 << 23, v - (1 << 24), v).astype(np.float32) / np.float32(1 << 23)
+    return np.frombuffer(raw, "<i2" if info.bits == 16 else "<i4").astype(np.float32) / np.float32(2.0 ** (info.bits - 1))
