@@ -1,6 +1,6 @@
 """``ssl-locate REC.wav --array cube8 [--sources 3]``: localize the sources in a multichannel WAV.
 
-Default: one whole-recording answer (every source the 128 ms windows find consistently, strongest
+Default: one whole-recording answer (every source the 128 ms windows find consistently, most consistent
 first). ``--stream``: every window's detections; ``--track``: the confirmed tracks
 (``ssl_core.tracking.Tracker``) after every window, fed with detections at the tracking gate
 ``TRACKING_MIN_SIGNIFICANCE``.
