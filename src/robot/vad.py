@@ -12,10 +12,12 @@ its leftover samples; all streams with a whole frame pending go through the netw
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
+from scipy import signal
 
 MODEL_PATH = Path(__file__).resolve().parent / "models" / "silero_vad_16k_op15.onnx"
 SAMPLE_RATE = 16000  # Hz; the 16 kHz-only export: the dual-rate model at 8 kHz measured no cheaper
@@ -80,8 +82,12 @@ class SileroVad:
             s.n_frames += c
         return [np.asarray(o) for o in out]
 
-    def probabilities(self, x: np.ndarray) -> np.ndarray:
-        """Speech probability per 32 ms frame of one whole mono 16 kHz signal (fresh state)."""
+    def probabilities(self, x: np.ndarray, fs: int = SAMPLE_RATE) -> np.ndarray:
+        """Speech probability per 32 ms frame of one whole mono float signal at ``fs`` Hz (resampled to
+        16 kHz if needed; fresh state)."""
+        if fs != SAMPLE_RATE:
+            g = math.gcd(int(fs), SAMPLE_RATE)
+            x = signal.resample_poly(np.asarray(x, float), SAMPLE_RATE // g, int(fs) // g)
         return self.process([self.new_stream()], [x])[0]
 
 
