@@ -1,7 +1,8 @@
 """Delay-and-sum beamforming toward directions in the array frame: the one beamformer of the project.
 
-Used by the Localizer (beam level of a detection), by ``robot.voice.beamform`` (a whole listen
-window) and by ``robot.hearing`` (a continuous beam per tracked source, ``StreamingBeamformer``).
+Delay-and-sum (``delay_and_sum``, ``beam_signal``) serves the Localizer (beam level of a detection)
+and the rescue behaviour (a beam over a listen window); ``robot.hearing`` listens to each tracked
+source continuously through ``MpdrBeamformer`` on a streaming STFT (``StftStream``, ``OverlapAdd``).
 Frames: array frame, +x forward, +y left, +z up; directions are unit vectors toward the source.
 """
 from __future__ import annotations
@@ -48,43 +49,103 @@ def beam_signal(samples: np.ndarray, positions: np.ndarray, direction: np.ndarra
     return scipy.fft.irfft(beam, nfft)[:n]
 
 
-class StreamingBeamformer:
-    """Continuous far-field delay-and-sum beams toward several directions, block by block.
+class StftStream:
+    """Streaming STFT of a multichannel signal: 512-sample sqrt-Hann frames, hop 256 (analysis x synthesis
+    windows sum to one, so ``OverlapAdd`` of unmodified frames gives the input back, one hop late)."""
 
-    Overlap-save: each block is transformed with the last ``history`` samples of the previous ones
-    in front; every channel is delayed by ``latency - arrival`` (>= 0, so the beam is causal and
-    a constant ``latency_s`` late), which wraps circularly only into the history part, discarded.
-    Directions may change from block to block (tracks move).
+    FRAME, HOP = 512, 256
+    WINDOW = np.sqrt(np.hanning(FRAME + 1)[:-1])
+
+    def __init__(self, n_channels: int) -> None:
+        self._pending = np.zeros((n_channels, self.HOP))  # input not yet in a whole frame
+
+    def analyse(self, block: np.ndarray) -> np.ndarray:
+        """``block`` (n_channels, n) float -> spectra (n_channels, n_frames, FRAME // 2 + 1) of the frames
+        completed by it (any block length; n_frames may be 0)."""
+        buf = np.concatenate([self._pending, np.asarray(block, float)], axis=1)
+        n = (buf.shape[1] - self.FRAME) // self.HOP + 1 if buf.shape[1] >= self.FRAME else 0
+        self._pending = buf[:, n * self.HOP:]
+        if n == 0:
+            return np.zeros((buf.shape[0], 0, self.FRAME // 2 + 1), complex)
+        frames = np.lib.stride_tricks.sliding_window_view(buf, self.FRAME, axis=1)[:, :: self.HOP][:, :n]
+        return scipy.fft.rfft(frames * self.WINDOW, axis=-1)
+
+    @classmethod
+    def mean_square(cls, spec: np.ndarray) -> np.ndarray:
+        """Mean square (per sample) of the signal behind one-sided frame spectra (..., n_frames, bins),
+        averaged over frames (Parseval with the window's energy)."""
+        p = np.abs(spec) ** 2
+        total = 2 * p.sum(axis=-1) - p[..., 0] - p[..., -1]
+        return total.mean(axis=-1) / (cls.FRAME * np.sum(cls.WINDOW**2)) if spec.shape[-2] else np.zeros(spec.shape[:-2])
+
+
+class OverlapAdd:
+    """Inverse of one channel of ``StftStream``: frame spectra in, HOP samples per frame out."""
+
+    def __init__(self) -> None:
+        self._tail = np.zeros(StftStream.HOP)
+
+    def synthesise(self, spec: np.ndarray) -> np.ndarray:
+        """``spec`` (n_frames, bins) -> (n_frames * HOP,) samples."""
+        if len(spec) == 0:
+            return np.zeros(0)
+        h = StftStream.HOP
+        y = scipy.fft.irfft(spec, StftStream.FRAME, axis=-1) * StftStream.WINDOW
+        heads = y[:, :h].copy()
+        heads[0] += self._tail
+        heads[1:] += y[:-1, h:]
+        self._tail = y[-1, h:].copy()
+        return heads.ravel()
+
+
+class MpdrBeamformer:
+    """Minimum-power distortionless-response beams on STFT frames (far field, array frame).
+
+    Per bin, ``w = R^-1 a / (a^H R^-1 a)`` with ``a`` the plane-wave steering vector toward the
+    direction and ``R`` the recursively averaged covariance of the microphone spectra (time constant
+    ``memory_s``) plus diagonal loading ``loading`` x its mean diagonal: unit gain toward the track,
+    least power from everything else. Measured on the 15 cm cube in a room of RT60 0.6 s (talker and a
+    machine 2 m away, 60-110 degrees apart): Silero VAD finds speech in the talker's beam in more 1 s
+    windows than with delay-and-sum and less of her in the machine's beam (README, "Telling a victim
+    from a machine"); loading 0.1 of the tried 0.001 / 0.01 / 0.1 held the talker best.
     """
 
-    def __init__(self, positions: np.ndarray, fs: float, sound_speed: float = SOUND_SPEED, history: int = 64):
+    def __init__(self, positions: np.ndarray, fs: float, memory_s: float = 3.0, loading: float = 0.1,
+                 sound_speed: float = SOUND_SPEED) -> None:
         self.positions = np.asarray(positions, float)
         if self.positions.ndim != 2 or self.positions.shape[1] != 3:
             raise ValueError(f"positions: expected (n_mics, 3) m, got shape {self.positions.shape}")
-        self.fs = float(fs)
-        self.sound_speed = float(sound_speed)
-        self.latency_s = float(np.linalg.norm(self.positions, axis=1).max() / sound_speed)
-        if history < 2 * self.latency_s * fs + 1:
-            raise ValueError(f"history: expected >= {int(2 * self.latency_s * fs) + 1} samples for this aperture, got {history}")
-        self._hist = np.zeros((len(self.positions), history))
+        if memory_s <= 0:
+            raise ValueError(f"memory_s: expected > 0 s, got {memory_s}")
+        if loading <= 0:
+            raise ValueError(f"loading: expected > 0, got {loading}")
+        self.freqs = np.fft.rfftfreq(StftStream.FRAME, 1.0 / fs)
+        self.sound_speed = sound_speed
+        self.loading = loading
+        self._forget = float(np.exp(-StftStream.HOP / fs / memory_s))
+        m = len(self.positions)
+        self._cov = np.zeros((len(self.freqs), m, m), complex)
+        self._weight = 0.0  # total weight in _cov (bias correction while it fills)
 
-    def process(self, block: np.ndarray, directions: np.ndarray) -> np.ndarray:
-        """``block`` (n_mics, n) float; ``directions`` (k, 3) unit vectors -> beams (k, n)."""
-        x = np.asarray(block, float)
-        if x.ndim != 2 or x.shape[0] != len(self.positions):
-            raise ValueError(f"block: expected ({len(self.positions)}, n), got {x.shape}")
+    def process(self, spec: np.ndarray, directions: np.ndarray) -> np.ndarray:
+        """``spec`` (n_mics, n_frames, bins) from ``StftStream``; ``directions`` (k, 3) -> beams (k, n_frames, bins)."""
         d = np.atleast_2d(np.asarray(directions, float))
-        h = self._hist.shape[1]
-        full = np.concatenate([self._hist, x], axis=1)
-        self._hist = full[:, -h:]
-        if len(d) == 0:
-            return np.zeros((0, x.shape[1]))
-        nfft = scipy.fft.next_fast_len(full.shape[1], real=True)
-        f = np.fft.rfftfreq(nfft, 1.0 / self.fs)
-        spec = scipy.fft.rfft(full, nfft, axis=-1)                                # (mics, bins)
-        delay = self.latency_s - arrival_times(self.positions, d, self.sound_speed)  # (k, mics) >= 0
-        beams = np.einsum("mf,kmf->kf", spec, np.exp(-2j * np.pi * delay[:, :, None] * f)) / len(self.positions)
-        return scipy.fft.irfft(beams, nfft, axis=-1)[:, h:full.shape[1]]
+        n = spec.shape[1]
+        if n:
+            decay = self._forget ** np.arange(n - 1, -1, -1)
+            new = np.einsum("t,mtf,ntf->fmn", decay * (1 - self._forget), spec, spec.conj())
+            self._cov = self._forget**n * self._cov + new
+            self._weight = self._forget**n * self._weight + (1 - self._forget**n)
+        if len(d) == 0 or n == 0:
+            return np.zeros((len(d), n, spec.shape[2]), complex)
+        m = len(self.positions)
+        cov = self._cov / max(self._weight, 1e-12)
+        load = self.loading * np.real(np.trace(cov, axis1=1, axis2=2)) / m + 1e-20
+        cov = cov + load[:, None, None] * np.eye(m)
+        steer = np.exp(-2j * np.pi * self.freqs[:, None, None] * arrival_times(self.positions, d, self.sound_speed).T[None])
+        ri_a = np.linalg.solve(cov, steer)                                    # (bins, mics, k)
+        w = ri_a / np.einsum("fmk,fmk->fk", steer.conj(), ri_a)[:, None, :]
+        return np.einsum("fmk,mtf->ktf", w.conj(), spec)
 
 
 def level_db(x: np.ndarray, axis: int = -1) -> np.ndarray:
