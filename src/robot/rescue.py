@@ -49,7 +49,7 @@ import numpy as np
 from robot.hal import AudioSource, Clock, DriveBase, DriveStatus, as_float_audio
 from robot.kinematics import OmniDriveParams
 from robot.odometry import Odometry, wrap_angle
-from robot.vad import SileroVad, speech_fraction
+from robot.vad import CHUNK_SPEECH_FRACTION, SileroVad, speech_fraction
 from ssl_core.beamform import beam_signal
 
 log = logging.getLogger(__name__)
@@ -78,8 +78,8 @@ class RescueConfig:
     # choosing
     prefer_voice: bool = True              # voice-like sources before louder non-voice ones
     require_voice: bool = False            # never approach a non-voice source
-    voice_threshold: float = 0.2           # VAD speech-frame fraction of the beam counted as voice (>= 0.2 of
-                                           # a 1 s chunk: 100 % of speech, 0 % of non-speech chunks, data/sounds test)
+    voice_threshold: float = CHUNK_SPEECH_FRACTION  # VAD speech-frame share of the beam counted as voice
+                                           # (robot.vad: 100 % of speech, 0 % of non-speech 1 s chunks of data/sounds)
     switch_ratio_db: float = 3.0           # another source must be this much louder to replace the target
     track_gate_deg: float = 25.0           # a detection this close to the target's predicted azimuth is it
     # found victims
