@@ -111,41 +111,47 @@ class MpdrBeamformer:
     """
 
     def __init__(self, positions: np.ndarray, fs: float, memory_s: float = 3.0, loading: float = 0.1,
-                 sound_speed: float = SOUND_SPEED) -> None:
+                 update_s: float = 0.25, sound_speed: float = SOUND_SPEED) -> None:
         self.positions = np.asarray(positions, float)
         if self.positions.ndim != 2 or self.positions.shape[1] != 3:
             raise ValueError(f"positions: expected (n_mics, 3) m, got shape {self.positions.shape}")
-        if memory_s <= 0:
-            raise ValueError(f"memory_s: expected > 0 s, got {memory_s}")
-        if loading <= 0:
-            raise ValueError(f"loading: expected > 0, got {loading}")
+        for name, v in (("memory_s", memory_s), ("loading", loading), ("update_s", update_s)):
+            if not v > 0:
+                raise ValueError(f"{name}: expected > 0, got {v}")
         self.freqs = np.fft.rfftfreq(StftStream.FRAME, 1.0 / fs)
         self.sound_speed = sound_speed
         self.loading = loading
         self._forget = float(np.exp(-StftStream.HOP / fs / memory_s))
+        # the inverse covariance is refreshed every update_s (it changes over memory_s, not per frame)
+        self._update_frames = max(1, int(round(update_s * fs / StftStream.HOP)))
         m = len(self.positions)
         self._cov = np.zeros((len(self.freqs), m, m), complex)
-        self._weight = 0.0  # total weight in _cov (bias correction while it fills)
+        self._weight = 0.0       # total weight in _cov (bias correction while it fills)
+        self._inv = None         # loaded inverse covariance (bins, m, m)
+        self._since = 0          # frames since _inv was computed
 
     def process(self, spec: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """``spec`` (n_mics, n_frames, bins) from ``StftStream``; ``directions`` (k, 3) -> beams (k, n_frames, bins)."""
         d = np.atleast_2d(np.asarray(directions, float))
         n = spec.shape[1]
         if n:
-            decay = self._forget ** np.arange(n - 1, -1, -1)
-            new = np.einsum("t,mtf,ntf->fmn", decay * (1 - self._forget), spec, spec.conj())
-            self._cov = self._forget**n * self._cov + new
+            s = spec.transpose(2, 0, 1)                                        # (bins, mics, frames)
+            decay = (1 - self._forget) * self._forget ** np.arange(n - 1, -1, -1)
+            self._cov = self._forget**n * self._cov + (s * decay) @ s.conj().transpose(0, 2, 1)
             self._weight = self._forget**n * self._weight + (1 - self._forget**n)
+            self._since += n
         if len(d) == 0 or n == 0:
             return np.zeros((len(d), n, spec.shape[2]), complex)
-        m = len(self.positions)
-        cov = self._cov / max(self._weight, 1e-12)
-        load = self.loading * np.real(np.trace(cov, axis1=1, axis2=2)) / m + 1e-20
-        cov = cov + load[:, None, None] * np.eye(m)
+        if self._inv is None or self._since >= self._update_frames:
+            m = len(self.positions)
+            cov = self._cov / max(self._weight, 1e-12)
+            load = self.loading * np.real(np.trace(cov, axis1=1, axis2=2)) / m + 1e-20
+            self._inv = np.linalg.inv(cov + load[:, None, None] * np.eye(m))
+            self._since = 0
         steer = np.exp(-2j * np.pi * self.freqs[:, None, None] * arrival_times(self.positions, d, self.sound_speed).T[None])
-        ri_a = np.linalg.solve(cov, steer)                                    # (bins, mics, k)
+        ri_a = self._inv @ steer                                                # (bins, mics, k)
         w = ri_a / np.einsum("fmk,fmk->fk", steer.conj(), ri_a)[:, None, :]
-        return np.einsum("fmk,mtf->ktf", w.conj(), spec)
+        return (w.conj().transpose(0, 2, 1) @ spec.transpose(2, 0, 1)).transpose(1, 2, 0)  # (k, frames, bins)
 
 
 def level_db(x: np.ndarray, axis: int = -1) -> np.ndarray:
