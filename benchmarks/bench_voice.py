@@ -105,15 +105,15 @@ def cost(seconds: float = 10.0) -> dict:
 
 
 def _hearing_cost(seconds: float) -> dict:
-    from types import SimpleNamespace
-
     from robot.hearing import Hearing, HearingConfig
+    from ssl_core.tracking import Track
     from ssl_core.geometry import cube8
 
     geo = cube8()
     rng = np.random.default_rng(1)
     block = FS // 10
-    tracks = [SimpleNamespace(id=i, direction=np.array([np.cos(a), np.sin(a), 0.0]), activity=1.0) for i, a in enumerate(np.deg2rad([0, 90, 180, 270]))]
+    tracks = [Track(i, np.array([np.cos(a), np.sin(a), 0.0]), np.zeros(3), 1.0, 0.0, 0.0, 0.0, 0.0, 0)
+              for i, a in enumerate(np.deg2rad([0, 90, 180, 270]))]
     hearing = Hearing(geo.positions, FS, HearingConfig())
     t = time.process_time()
     for k in range(int(seconds * 10)):

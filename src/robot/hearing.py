@@ -26,7 +26,7 @@ from __future__ import annotations
 
 import enum
 from dataclasses import dataclass
-from typing import Protocol, Sequence
+from typing import Sequence
 
 import numpy as np
 
@@ -34,14 +34,7 @@ from robot.hal import as_float_audio
 from robot.vad import SAMPLE_RATE, SPEECH_THRESHOLD, SileroVad, VadStream
 from ssl_core.beamform import FULL_SCALE_SINE_MS, MpdrBeamformer, OverlapAdd, StftStream, level_db
 from ssl_core.noise import NoiseFloor
-
-
-class TrackLike(Protocol):
-    """What Hearing needs of a track (``ssl_core.tracking.Track`` has these fields)."""
-
-    id: int
-    direction: np.ndarray  # (3,) unit vector, array frame
-    activity: float        # 0..1
+from ssl_core.tracking import Track
 
 
 @dataclass(frozen=True)
@@ -106,8 +99,9 @@ class Hearing:
     """``update(block, tracks, time)`` per audio block -> one ``TrackEvidence`` per given track.
 
     ``mic_positions`` (n_mics, 3) m, array frame; ``sample_rate`` must be 16 kHz (the VAD's rate).
-    Tracks are matched by id; the state of an id that is no longer given is dropped (track ids are
-    never reused).
+    ``tracks``: the ``ssl_core.tracking.Tracker``'s tracks (only ``id``, ``direction`` and ``activity``
+    are used). Tracks are matched by id; the state of an id that is no longer given is dropped (track
+    ids are never reused).
     """
 
     def __init__(self, mic_positions: np.ndarray, sample_rate: int = SAMPLE_RATE,
@@ -121,7 +115,7 @@ class Hearing:
         self.vad = vad or SileroVad()
         self._state: dict[int, _TrackState] = {}
 
-    def update(self, block: np.ndarray, tracks: Sequence[TrackLike], time: float) -> list[TrackEvidence]:
+    def update(self, block: np.ndarray, tracks: Sequence[Track], time: float) -> list[TrackEvidence]:
         cfg = self.config
         x = as_float_audio(block)
         dt = x.shape[-1] / SAMPLE_RATE
