@@ -8,7 +8,7 @@ import pytest
 
 from robot.hearing import Hearing, HearingConfig, TrackEvidence, VoiceClass, classify
 from signals import plane_wave
-from sound_dataset import FS, recordings
+from sound_dataset import FS, ROOM_CASES, recordings, room_case
 from ssl_core.beamform import MpdrBeamformer, OverlapAdd, StftStream, beam_signal
 from ssl_core.geometry import cube8
 from ssl_core.tracking import Track
@@ -88,42 +88,18 @@ def test_a_dropped_track_is_forgotten_and_config_errors_name_the_field():
 
 
 # --- reverberant room: a talker and a real machine 6 dB louder ------------------------------------
-# The five configurations tried while developing (all kept): talker, machine (data/sounds test part),
-# their azimuths (deg, array frame), both 2 m from the array centre at 1.2 m height.
-ROOM_CASES = [("it_carlo", "ore_mine", 30, -50), ("fr_june", "industry_light", 120, 40),
-              ("en_librivox", "jackhammer", -100, 0), ("it_carlo", "mill", 170, 90), ("fr_june", "ore_mine", 0, -70)]
 SETTLE_S = 2  # windows before this are not scored: MPDR covariance and noise floors still filling
 
 
 def _room_run(talker, machine, az_t, az_m, seconds=16):
-    from ssl_sim.acoustics import AcousticConfig, AcousticSimulator, RobotPose
-    from ssl_sim.acoustics.pose import ArrayMount
-    from ssl_sim.acoustics.signals import LoopedSignal
-    from ssl_sim.acoustics.sources import SoundSource
-    from ssl_sim.world import Room, World
-
-    pose, mount = RobotPose(3.5, 3.0, yaw=0.0), ArrayMount()
-    c = mount.centre_world(pose)
-    at = [c + 2.0 * _unit(az) for az in (az_t, az_m)]
-    speech = _recording(talker).samples
-    fr = speech[: len(speech) // 512 * 512].reshape(-1, 512)
-    e = 10 * np.log10((fr**2).mean(1) + 1e-12)
-    talking = e >= e.max() - 30
-    active_rms = np.sqrt((fr[talking] ** 2).mean())  # talker level = level while talking
-    srcs = [SoundSource(tuple(at[0]), LoopedSignal(speech / active_rms, FS, normalise=False), 62.0),
-            SoundSource(tuple(at[1]), LoopedSignal(_recording(machine).samples, FS), 68.0)]
-    sim = AcousticSimulator(World(room=Room((7.0, 6.0, 3.2))), AcousticConfig(rt60_s=0.6, seed=1), srcs)
-    x = sim.listen_pose(pose, float(seconds), mount=mount)
-    tracks = [_track(i, (p - c) / np.linalg.norm(p - c), 1.0) for i, p in enumerate(at)]
+    x, directions, she_talks = room_case(talker, machine, az_t, az_m, seconds)
+    tracks = [_track(i, d, 1.0) for i, d in enumerate(directions)]
     h = Hearing(POS)
     out = []
     for k in range(seconds * 10):
         ev = h.update(x[:, k * BLOCK:(k + 1) * BLOCK], tracks, (k + 1) / 10)
         if (k + 1) % 10 == 0:
             out.append([classify(e) for e in ev])
-    n_win = len(speech) // 512
-    per_s = FS // 512
-    she_talks = [talking[np.arange(w * per_s, (w + 1) * per_s) % n_win].mean() >= 0.5 for w in range(seconds)]
     return out, she_talks
 
 
