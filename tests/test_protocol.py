@@ -225,7 +225,7 @@ class FakeMCU(threading.Thread):
             self.drop_next -= 1
             return None
         if isinstance(msg, P.Ping):
-            return self.reply(P.Pong(msg.nonce, 1, 0x0100, 5, 400), fr.seq)
+            return self.reply(P.Pong(msg.nonce, P.PROTOCOL_VERSION, 0x0200, 5, 400), fr.seq)
         if isinstance(msg, P.GetTelemetry):
             return self.reply(self.telemetry, fr.seq)
         if isinstance(msg, P.SetHeading) and abs(msg.azimuth_mrad) > P.AZIMUTH_LIMIT_MRAD:
@@ -254,7 +254,7 @@ FAST = SerialDriveConfig(reply_timeout=0.05, retries=3, keepalive=None, connect_
 
 def test_drive_commands_and_replies_over_pty(fake):
     with SerialDrive(fake.path, FAST) as drive:
-        assert drive.board is not None and drive.board.firmware_version == 0x0100
+        assert drive.board is not None and drive.board.firmware_version == 0x0200
         assert drive.ping() < 0.05
         drive.set_twist(0.2, -0.1, 0.5)
         drive.set_heading(math.radians(-4.0), 0.3)           # the paper's azimuth command
