@@ -212,7 +212,7 @@ int main(void)
         link_rx_mark_seen();              /* bytes arriving from here on keep us awake */
         for (;;) {
             uint16_t t0 = cycles_now();
-            uint8_t got = link_poll(&f, ms_now());   /* fresh: a dispatch may have waited */
+            uint8_t got = link_poll(&f);
             uint16_t dt = (uint16_t)(cycles_now() - t0);
             if (dt > max_parse_cycles)
                 max_parse_cycles = dt;
