@@ -483,3 +483,68 @@ def test_stalled_wheel_is_reported(built):
             assert tel.encoder_counts[1] == 0 and tel.encoder_counts[0] > 0
     finally:
         b.close()
+
+
+# --------------------------------------------------------------------------- sensors (issue 13)
+def _counts(rad_s: float) -> int:
+    return round(rad_s * P.GYRO_COUNTS_PER_RAD_S)
+
+
+def test_gyro_yaw_rate_reaches_status(board, built):
+    """The firmware reads the virtual MPU-6050 over I2C; SerialDrive.status returns its yaw rate in rad/s
+    with the zero-rate bias, read while the robot stands still, removed."""
+    bias = 0.031                                       # rad/s (the MPU-6050 allows +-20 deg/s = 0.35 rad/s)
+    with SerialDrive(board.port, SerialDriveConfig(keepalive=0.1)) as d:
+        board.settle()
+        c = board.command(f"GYRO {bias}", "GYRO")
+        board.wait_sim(c + int(0.12 * F_CPU))           # a full 50 ms window with the new value
+        t = d.telemetry()
+        assert t.gyro_ok and abs(t.gyro_z - _counts(bias)) <= 1, t.gyro_z
+        assert d.gyro_bias == pytest.approx(bias, abs=1.01 / P.GYRO_COUNTS_PER_RAD_S)
+        assert abs(d.status().yaw_rate) <= 1.01 / P.GYRO_COUNTS_PER_RAD_S
+        for rate in (0.8, -1.5, 5.0):                  # CCW positive; 5 rad/s = 286 deg/s of the +-500 range
+            d.set_twist(0.0, 0.0, rate)
+            c = board.command(f"GYRO {rate + bias}", "GYRO")
+            board.wait_sim(c + int(0.12 * F_CPU))
+            st = d.status()
+            # one count of quantisation each for the reading and the bias
+            assert st.yaw_rate == pytest.approx(rate, abs=2.01 / P.GYRO_COUNTS_PER_RAD_S), rate
+        assert d.gyro_bias == pytest.approx(bias, abs=1.01 / P.GYRO_COUNTS_PER_RAD_S)   # not learned while moving
+        d.stop()
+        board.command("GYRO 0", "GYRO")
+
+
+def test_board_without_gyro_reports_none(built):
+    b = SimBoard("--no-gyro")
+    try:
+        with SerialDrive(b.port, SerialDriveConfig(keepalive=None)) as d:
+            b.wait_sim(int(0.1 * F_CPU))
+            t = d.telemetry()
+            assert not t.gyro_ok and t.gyro_z == 0
+            st = d.status()
+            assert st.yaw_rate is None and st.ok
+    finally:
+        b.close()
+
+
+def test_bumpers_reach_status(board, drive):
+    assert not drive.status().bumper
+    c = board.command("BUMP 5", "BUMP")                 # PC0 and PC2 pressed
+    board.wait_sim(c + int(0.05 * F_CPU))
+    assert drive.telemetry().bumpers & P.BUMPERS_LIVE == 0b0101
+    assert drive.status().bumper
+    c = board.command("BUMP 0", "BUMP")
+    board.wait_sim(c + int(0.05 * F_CPU))
+    assert drive.telemetry().bumpers & P.BUMPERS_LIVE == 0
+    assert drive.status().bumper                       # it was pressed since the previous status ...
+    assert not drive.status().bumper                   # ... and is not now
+    # a 20 ms tap between two polls is not lost
+    c = board.command("BUMP 2 20", "BUMP")
+    board.wait_sim(c + int(0.1 * F_CPU))
+    assert drive.telemetry().bumpers & P.BUMPERS_LIVE == 0
+    assert drive.status().bumper
+    assert not drive.status().bumper
+    # contact bounce shorter than the 5 ms debounce time is not a press
+    c = board.command("BUMP 8 3", "BUMP")
+    board.wait_sim(c + int(0.05 * F_CPU))
+    assert not drive.status().bumper
