@@ -116,7 +116,7 @@ class SimBoard:
             assert time.monotonic() < deadline, "simulation stalled"
             time.sleep(0.005)
 
-    def wait_pwm(self, n_before: int, timeout: float = 1.0) -> PwmEvent:
+    def wait_pwm(self, n_before: int, timeout: float = 10.0) -> PwmEvent:
         """The first PWM event after the first ``n_before`` ones."""
         deadline = time.monotonic() + timeout
         while len(self.pwm) <= n_before:
@@ -157,7 +157,8 @@ def board(built):
 
 @pytest.fixture
 def drive(board):
-    d = SerialDrive(board.port, SerialDriveConfig(keepalive=None, connect_timeout=3.0))
+    # never resends (a resend is one more frame in the MCU's counters): a reply may take 5 s on a loaded host
+    d = SerialDrive(board.port, SerialDriveConfig(keepalive=None, connect_timeout=3.0, reply_timeout=5.0, retries=0))
     board.settle()
     yield d
     d.close()
@@ -195,45 +196,51 @@ def test_ping_round_trip(board, drive):
     pong = drive.board
     assert pong.nonce == 0x12345678 and pong.protocol_version == P.PROTOCOL_VERSION
     assert pong.firmware_version == 0x0200 and pong.pwm_top == P.PWM_TOP
-    assert 0 < rtt < 0.1
-    up0 = pong.uptime_ms
-    time.sleep(0.05)
+    assert rtt > 0
+    # the MCU's millisecond clock (T0 configuration) keeps simulated time: compare with the harness's cycles
+    board.wait_sim(1)
+    c0 = board.enc[-1][0]
     drive.ping()
-    assert drive.board.uptime_ms >= up0 + 40          # the MCU clock runs ~ in step with ours
+    up = drive.board.uptime_ms
+    board.wait_sim(board.enc[-1][0] + 1)                # a report after the reply
+    assert c0 / F_CPU * 1000 - 1 <= up <= board.enc[-1][0] / F_CPU * 1000
 
 
-def test_twist_and_heading_pwm_match_python_ik(board, drive):
-    cases = [
-        ("twist", (0.20, 0.0, 0.0)),
-        ("twist", (0.0, -0.15, 0.0)),
-        ("twist", (0.0, 0.0, 1.2)),
-        ("twist", (0.3, 0.1, -0.8)),
-        ("twist", (-0.25, 0.2, 0.5)),
-        ("twist", (2.0, 1.0, 3.0)),                     # saturates: scaled to 20 rad/s, direction kept
-        ("heading", (math.radians(-4.0), 0.3)),         # the paper's azimuth command
-        ("heading", (math.radians(145.0), 0.5)),
-        ("heading", (math.radians(-135.0), 0.4)),
-    ]
-    worst = 0.0
-    for kind, args in cases:
-        n = len(board.pwm)
-        if kind == "twist":
-            drive.set_twist(*args)
-            twist = args
-        else:
-            drive.set_heading(*args)
-            az = round(args[0] * 1000) / 1000             # what went over the wire (mrad, mm/s)
-            twist = (args[1] * math.cos(az), args[1] * math.sin(az), 0.0)
-        ev = board.wait_pwm(n)
-        want = expected_duty(twist)
-        err = np.abs(np.array(ev.duty) - want)
-        worst = max(worst, float(err.max()))
-        assert err.max() <= 0.51, f"{kind}{args}: firmware {ev.duty}, python IK {np.round(want, 2)}"
-        assert np.all(np.sign(ev.duty) == np.sign(np.round(want))), (ev.duty, want)
-        limited = bool(drive.telemetry().faults & P.Fault.SPEED_LIMITED)
-        assert limited == (np.abs(twist_to_wheels(twist) - OmniDriveParams().jacobian @ twist).max() > 1e-9)
-    drive.stop()
-    print(f"worst |duty - IK| = {worst:.3f} counts of {P.PWM_TOP}")
+def test_twist_and_heading_pwm_match_python_ik(board, built):
+    # keepalive on: a slow host (CPU load) must not let the 200 ms command watchdog ramp between cases
+    with SerialDrive(board.port, SerialDriveConfig(keepalive=0.1, reply_timeout=5.0, retries=0)) as drive:
+        board.settle()
+        cases = [
+            ("twist", (0.20, 0.0, 0.0)),
+            ("twist", (0.0, -0.15, 0.0)),
+            ("twist", (0.0, 0.0, 1.2)),
+            ("twist", (0.3, 0.1, -0.8)),
+            ("twist", (-0.25, 0.2, 0.5)),
+            ("twist", (2.0, 1.0, 3.0)),                     # saturates: scaled to 20 rad/s, direction kept
+            ("heading", (math.radians(-4.0), 0.3)),         # the paper's azimuth command
+            ("heading", (math.radians(145.0), 0.5)),
+            ("heading", (math.radians(-135.0), 0.4)),
+        ]
+        worst = 0.0
+        for kind, args in cases:
+            n = len(board.pwm)
+            if kind == "twist":
+                drive.set_twist(*args)
+                twist = args
+            else:
+                drive.set_heading(*args)
+                az = round(args[0] * 1000) / 1000             # what went over the wire (mrad, mm/s)
+                twist = (args[1] * math.cos(az), args[1] * math.sin(az), 0.0)
+            ev = board.wait_pwm(n)
+            want = expected_duty(twist)
+            err = np.abs(np.array(ev.duty) - want)
+            worst = max(worst, float(err.max()))
+            assert err.max() <= 0.51, f"{kind}{args}: firmware {ev.duty}, python IK {np.round(want, 2)}"
+            assert np.all(np.sign(ev.duty) == np.sign(np.round(want))), (ev.duty, want)
+            limited = bool(drive.telemetry().faults & P.Fault.SPEED_LIMITED)
+            assert limited == (np.abs(twist_to_wheels(twist) - OmniDriveParams().jacobian @ twist).max() > 1e-9)
+        drive.stop()
+        print(f"worst |duty - IK| = {worst:.3f} counts of {P.PWM_TOP}")
 
 
 def test_stop_acts_at_once(board, drive):
@@ -261,7 +268,7 @@ def test_keepalive_holds_a_refreshed_command(board, built):
         d.stop()
 
 
-def _wait_zero(board, n: int, timeout: float = 5.0) -> list[PwmEvent]:
+def _wait_zero(board, n: int, timeout: float = 20.0) -> list[PwmEvent]:
     deadline = time.monotonic() + timeout
     while not (len(board.pwm) > n + 1 and board.pwm[-1].duty == (0, 0, 0)):
         assert time.monotonic() < deadline, "motors not stopped"
@@ -303,9 +310,9 @@ def test_hung_control_loop_stops_the_robot(board, built):
         assert ev[0].duty == (200, 200, 200)
         held = (ev[-1].cycle - ev[0].rx_cycle) / F_CPU
         assert held <= deadline_s + P.STOP_DEADLINE_S, held
-        assert held > P.STOP_DEADLINE_S + 0.1, held    # the keepalive did hold it past the MCU's own timeout
+        # kept alive past the MCU's own 200 ms (no watchdog ramp), then the host's STOP at the deadline
+        assert [e.duty for e in ev] == [(200, 200, 200), (0, 0, 0)]
         assert d.stats.keepalives >= 3 and d.stats.deadline_stops == 1
-        assert [e.duty for e in ev] == [(200, 200, 200), (0, 0, 0)]   # the host's STOP: no ramp needed
         d.set_twist(0.0, 0.0, 4.0)                     # a live loop drives again
         assert board.wait_pwm(n + 2).duty == (200, 200, 200)
         d.stop()
@@ -432,10 +439,12 @@ def test_encoders_and_odometry_follow_the_wheels(board, built):
     with SerialDrive(board.port, SerialDriveConfig(keepalive=0.1)) as d:
         a0 = d.odometry().wheel_angles
         d.set_twist(*twist)
-        time.sleep(0.5)
+        for _ in range(10):                             # a control loop, 0.5 s
+            time.sleep(0.05)
+            d.set_twist(*twist)
         odo = d.odometry()
         t = d.telemetry()
-        time.sleep(0.12)                                # keep moving past the model's next report
+        board.wait_sim(int((t.uptime_ms / 1000 + 0.06) * F_CPU))   # keep moving past the model's next report
         d.stop()
     k = 2 * np.pi / COUNTS_PER_REV
     want = twist_to_wheels(twist, params)
@@ -462,9 +471,9 @@ def test_hardware_watchdog_is_enabled_and_kept(board, drive):
     assert wdtcsr & 0x08, f"WDE not set: WDTCSR=0x{wdtcsr:02X}"
     assert (wdtcsr & 0x07) | ((wdtcsr >> 5 & 1) << 3) == 3, "expected the 120 ms prescaler"
     up0 = drive.telemetry().uptime_ms
-    time.sleep(0.3)
+    board.wait_sim(int((up0 / 1000 + 0.3) * F_CPU))    # 300 ms of simulated time, 2.5 watchdog periods
     t = drive.telemetry()
-    assert t.uptime_ms >= up0 + 250                  # no watchdog reset in between
+    assert t.uptime_ms >= up0 + 300                  # no watchdog reset in between
     assert not t.faults & P.Fault.WDT_RESET
 
 
@@ -474,10 +483,11 @@ def test_stalled_wheel_is_reported(built):
         with SerialDrive(b.port, SerialDriveConfig(keepalive=0.1)) as d:
             d.set_twist(0.0, 0.0, 3.0)                 # every wheel at 7.5 rad/s: 37.5 % duty
             assert not d.status().stalled
-            deadline = time.monotonic() + 5.0
+            deadline = time.monotonic() + 20.0
             while not (st := d.status()).stalled:       # 500 ms without an edge (simulated time)
                 assert time.monotonic() < deadline, "stall not reported"
                 time.sleep(0.05)
+                d.set_twist(0.0, 0.0, 3.0)             # a control loop refreshes its command
             assert not st.ok
             tel = d.telemetry()
             assert tel.encoder_counts[1] == 0 and tel.encoder_counts[0] > 0

@@ -335,27 +335,32 @@ class SerialDrive(DriveBase):
         while True:
             now = time.monotonic()
             if now >= deadline:
-                return None
+                # give up an incomplete candidate only now, and rescan the bytes it held: a gap mid-reply
+                # on a loaded host or USB link is no reason to lose the reply (it once cost a resend)
+                return self._reply_in(self.parser.drop_partial(), cmd_type, seq, expect)
             try:
                 self._ser.timeout = min(0.01, deadline - now)
                 chunk = self._ser.read(max(1, self._ser.in_waiting))
             except (*_LINK_ERRORS, TypeError) as e:
                 # pyserial raises TypeError/OSError from a port whose device disappeared mid-read
                 raise DriveLinkError(f"drive serial port {self.port!r} failed on read: {e}") from e
-            # a pause mid-frame is an inter-byte timeout: give up the partial frame and rescan it
-            frames = self.parser.feed(chunk) if chunk else self.parser.drop_partial()
-            for fr in frames:
-                if fr.msg_type < 0x80:
-                    continue                     # a command (our own echo on loop://): not a reply
-                try:
-                    msg = fr.decode()
-                except P.ProtocolError:
-                    self.stats.bad_replies += 1
-                    continue
-                if fr.seq != seq or not _answers(msg, cmd_type, expect):
-                    self.stats.stale_replies += 1
-                    continue
-                return msg
+            if chunk and (reply := self._reply_in(self.parser.feed(chunk), cmd_type, seq, expect)) is not None:
+                return reply
+
+    def _reply_in(self, frames: list[P.Frame], cmd_type: int, seq: int, expect: P.MsgType) -> P.Message | None:
+        for fr in frames:
+            if fr.msg_type < 0x80:
+                continue                     # a command (our own echo on loop://): not a reply
+            try:
+                msg = fr.decode()
+            except P.ProtocolError:
+                self.stats.bad_replies += 1
+                continue
+            if fr.seq != seq or not _answers(msg, cmd_type, expect):
+                self.stats.stale_replies += 1
+                continue
+            return msg
+        return None
 
 
 def _answers(reply: P.Message, cmd_type: int, expect: P.MsgType) -> bool:
