@@ -289,6 +289,8 @@ def fake():
 
 
 FAST = SerialDriveConfig(reply_timeout=0.05, retries=3, keepalive=None, connect_timeout=1.0)
+# for tests that count resends or replies: the fake MCU is a Python thread, slow to answer on a loaded machine
+STEADY = SerialDriveConfig(reply_timeout=2.0, retries=0, keepalive=None, connect_timeout=3.0)
 
 
 def test_drive_commands_and_replies_over_pty(fake):
@@ -315,7 +317,8 @@ def test_drive_commands_and_replies_over_pty(fake):
 
 
 def test_missing_reply_is_resent_with_same_seq(fake):
-    with SerialDrive(fake.path, FAST) as drive:
+    cfg = SerialDriveConfig(reply_timeout=0.3, retries=3, keepalive=None, connect_timeout=1.0)
+    with SerialDrive(fake.path, cfg) as drive:
         n0 = len(fake.received)
         fake.drop_next = 2
         drive.set_twist(0.1, 0, 0)
@@ -329,7 +332,7 @@ def test_missing_reply_is_resent_with_same_seq(fake):
 
 
 def test_garbage_and_stale_replies_are_skipped(fake):
-    with SerialDrive(fake.path, FAST) as drive:
+    with SerialDrive(fake.path, STEADY) as drive:
         fake.garbage = bytes([0x00, P.SOF, 0x03, 0x81, P.SOF, 0xFF, 0x12, P.SOF])
         fake.stale_first = True
         for _ in range(5):
@@ -394,7 +397,7 @@ def test_loop_url_echo_is_not_a_reply():
 
 def test_nak_for_another_message_with_the_same_seq_is_not_ours(fake):
     """Issue 14: replies are matched on type and seq; a NAK naming another command is skipped."""
-    with SerialDrive(fake.path, FAST) as drive:
+    with SerialDrive(fake.path, STEADY) as drive:
         fake.foreign_nak_first = True
         for _ in range(5):
             drive.set_twist(0.1, 0.0, 0.0)             # the NAK names SET_HEADING: not this command's reply

@@ -129,6 +129,7 @@ class SerialDrive(DriveBase):
         self.stats = LinkStats()
         self.parser = P.FrameParser()
         self.board: P.Pong | None = None        # last PONG (firmware version, PWM top)
+        self.speed_limited = False              # the last motion command was scaled to the wheel-speed limit
         self._seq = 0
         self._lock = threading.RLock()
         self._active: P.Message | None = None   # non-zero motion command kept alive
@@ -258,7 +259,8 @@ class SerialDrive(DriveBase):
 
     def _motion(self, msg: P.Message, moving: bool) -> None:
         with self._lock:
-            self._transact(msg, P.MsgType.ACK)
+            ack = self._transact(msg, P.MsgType.ACK)
+            self.speed_limited = bool(ack.flags & P.ACK_SPEED_LIMITED)
             self._last_motion = self._last_set = time.monotonic()
             self._active = msg if moving else None
 
