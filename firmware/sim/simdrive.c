@@ -30,7 +30,7 @@
  *                             enter the UART back-to-back, one per character time of
  *                             *simulated* time, whatever the host's scheduling; "RXDONE
  *                             <cycle>" when the last has been received
- *        BUMP <mask> [ms]     press the switches in mask (bit i = PCi), all others released;
+ *        BUMP <hex mask> [ms] press the switches in mask (bit i = PCi), all others released;
  *                             with ms, release them after that much simulated time
  *        GYRO <rad/s>         the gyro's true Z rate (the test adds any bias it wants)
  *

@@ -144,7 +144,7 @@ class SerialDrive(DriveBase):
             self._ser = serial.serial_for_url(port, baudrate=self.config.baudrate, timeout=0.01, write_timeout=1.0,
                                               exclusive=True if os.name == "posix" else None)
         except (serial.SerialException, OSError, ValueError) as e:
-            if getattr(e, "errno", None) in (errno.EWOULDBLOCK, errno.EAGAIN, errno.EACCES):
+            if getattr(e, "errno", None) in (errno.EWOULDBLOCK, errno.EAGAIN):     # pyserial's failed flock
                 raise DriveLinkError(f"drive serial port {port!r} is in use by another program (another SerialDrive "
                                      f"or ssl-robot?): only one may command the motors") from e
             raise DriveLinkError(f"drive serial port {port!r} cannot be opened: {e}") from e
@@ -227,7 +227,7 @@ class SerialDrive(DriveBase):
             raise DriveLinkError(f"drive on {self.port!r} echoed nonce {pong.nonce}, expected {nonce}")
         if pong.protocol_version != P.PROTOCOL_VERSION:
             raise DriveProtocolError(f"drive on {self.port!r} speaks protocol version {pong.protocol_version}, this "
-                                     f"host version {P.PROTOCOL_VERSION}: flash firmware/ (make -C firmware flash)")
+                                     f"host speaks {P.PROTOCOL_VERSION}: flash firmware/ (make -C firmware flash)")
         self.board = pong
         return rtt
 
