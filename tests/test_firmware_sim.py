@@ -571,3 +571,18 @@ def test_bumpers_reach_status(board, drive):
     c = board.command("BUMP 8 3", "BUMP")
     board.wait_sim(c + int(0.05 * F_CPU))
     assert not drive.status().bumper
+
+
+def test_gyro_unplugged_and_plugged_back_is_found_again(board, drive):
+    """A gyro that stops answering is reported gone at once and re-probed (and reconfigured) every second."""
+    c = board.command("GYRO 1.25", "GYRO")
+    board.wait_sim(c + int(0.12 * F_CPU))
+    assert drive.telemetry().gyro_ok
+    c = board.command("GYRO unplug", "GYRO")
+    board.wait_sim(c + int(0.02 * F_CPU))              # the next 5 ms read fails
+    assert drive.status().yaw_rate is None
+    c = board.command("GYRO plug", "GYRO")             # powered up afresh: asleep, default full scale
+    board.wait_sim(c + int(1.2 * F_CPU))               # <= 1 s to the next probe, then one 50 ms window
+    t = drive.telemetry()
+    assert t.gyro_ok and abs(t.gyro_z - _counts(1.25)) <= 1   # woken and set to +-500 deg/s again
+    board.command("GYRO 0", "GYRO")

@@ -13,6 +13,7 @@
 
 #include <math.h>
 #include <stdint.h>
+#include <string.h>
 
 #include "avr_twi.h"
 #include "sim_avr.h"
@@ -27,9 +28,21 @@ static struct {
     int selected;            /* addressed since the last START/STOP */
     int wrote_ptr;           /* first written byte of a write transfer (the pointer) seen */
     double rate;             /* true Z rate, rad/s */
+    int unplugged;           /* answers nothing (NACK) */
 } gyro_part;
 
 static void gyro_part_set_rate(double rad_s) { gyro_part.rate = rad_s; }
+
+/* Unplug (1) or plug in (0) the chip; plugging in powers it up afresh (registers reset). */
+static void gyro_part_unplug(int unplugged)
+{
+    if (gyro_part.unplugged && !unplugged) {
+        memset(gyro_part.reg, 0, sizeof gyro_part.reg);
+        gyro_part.reg[0x75] = 0x68;
+        gyro_part.reg[0x6B] = 0x40;
+    }
+    gyro_part.unplugged = unplugged;
+}
 
 static void gyro_part_latch_z(void)
 {
@@ -51,7 +64,7 @@ static void gyro_part_bus(struct avr_irq_t *irq, uint32_t value, void *param)
     if (m.u.twi.msg & TWI_COND_STOP)
         gyro_part.selected = 0;
     if (m.u.twi.msg & TWI_COND_START) {
-        gyro_part.selected = (m.u.twi.addr >> 1) == GYRO_PART_ADDR;
+        gyro_part.selected = (m.u.twi.addr >> 1) == GYRO_PART_ADDR && !gyro_part.unplugged;
         gyro_part.wrote_ptr = 0;
         if (gyro_part.selected) {
             gyro_part_latch_z();         /* a real chip latches its data registers per sample */

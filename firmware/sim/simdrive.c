@@ -33,6 +33,7 @@
  *        BUMP <hex mask> [ms] press the switches in mask (bit i = PCi), all others released;
  *                             with ms, release them after that much simulated time
  *        GYRO <rad/s>         the gyro's true Z rate (the test adds any bias it wants)
+ *        GYRO unplug | plug   the chip stops answering / is plugged in again (powered up afresh)
  *
  * usage: simdrive [--stall WHEEL] [--speed X] [--duration S] [--cpr N] [--max-speed RADS]
  *                 [--pwm-top N] [--profile ADDR] [--no-gyro] firmware.elf
@@ -185,7 +186,10 @@ static void run_command(char *line)
         bump_release_at = ms > 0 ? avr->cycle + (avr_cycle_count_t)(ms * 1e-3 * F_SIM) : 0;
         printf("BUMP %llu %x\n", (unsigned long long)avr->cycle, mask);
     } else if (!strcmp(line, "GYRO") && arg) {
-        gyro_part_set_rate(atof(arg));
+        if (!strcmp(arg, "unplug") || !strcmp(arg, "plug"))
+            gyro_part_unplug(!strcmp(arg, "unplug"));
+        else
+            gyro_part_set_rate(atof(arg));
         printf("GYRO %llu %s\n", (unsigned long long)avr->cycle, arg);
     } else {
         fprintf(stderr, "simdrive: unknown command %s\n", line);
