@@ -33,7 +33,8 @@ PWM_TOP = 400              # firmware duty counts for 100 % (reported in PONG to
 ENCODER_WINDOW_S = 0.050   # telemetry ``encoder_rate`` = counts in the last 50 ms window
 COMMAND_TIMEOUT_S = 0.200  # the MCU starts ramping the motors down this long after the last motion command ...
 STOP_DEADLINE_S = 0.300    # ... and every duty is zero by this long after it (firmware: 290-291 ms), at any duty
-GYRO_COUNTS_PER_RAD_S = 65.5 * 180.0 / math.pi   # TELEMETRY gyro_z scale: MPU-6050 FS_SEL 1 (+-500 deg/s), 65.5 LSB/(deg/s)
+# TELEMETRY gyro_z scale: MPU-6050 at FS_SEL 1 (+-500 deg/s), 65.5 LSB per deg/s (datasheet, table 6.1)
+GYRO_COUNTS_PER_RAD_S = 65.5 * 180.0 / math.pi
 
 
 class ProtocolError(ValueError):
