@@ -265,8 +265,10 @@ class RescueBehaviour:
         except EOFError as exc:
             self._finish("audio_ended", f"audio source exhausted ({exc})")
         except BaseException as exc:
-            self._safe_stop()
-            self._emit("error", f"{type(exc).__name__}: {exc}; drive stopped", {"exception": type(exc).__name__})
+            failed = self._safe_stop()
+            outcome = "drive stopped" if failed is None else f"stopping the drive failed too ({failed})"
+            self._emit("error", f"{type(exc).__name__}: {exc}; {outcome}",
+                       {"exception": type(exc).__name__, "stopped": failed is None})
             raise
         finally:
             self._safe_stop()
@@ -642,11 +644,14 @@ class RescueBehaviour:
         self.state = RescueState.DONE
         self._emit(decision, reason, {"victims": [v.position for v in self.victims]})
 
-    def _safe_stop(self) -> None:
+    def _safe_stop(self) -> Exception | None:
+        """Stop the drive; the exception if that failed (logged, never raised)."""
         try:
             self.drive.stop()
         except Exception as exc:  # never mask the original error; the backend's own failsafe must act
             log.error("drive.stop() failed: %s", exc)
+            return exc
+        return None
 
     def _emit(self, decision: str, reason: str, data: dict[str, Any] | None = None) -> RescueEvent:
         ev = RescueEvent(self.clock.now(), self.state, decision, reason, dict(data or {}))
