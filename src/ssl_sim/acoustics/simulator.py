@@ -25,6 +25,7 @@ from scipy import fft as sfft
 
 from ssl_sim.world import World
 
+from .diffraction import BoxSet, diffracted_arrivals, room_images
 from .materials import eyring_absorption_for_rt60, uniform_material
 from .noise import AmbientNoise, DiffuseNoiseField
 from .pose import ArrayMount, RobotPose
@@ -46,6 +47,8 @@ class AcousticConfig:
     the array centre snapped to this grid (the 15 cm array shares one visibility set; delays and
     amplitudes are exact per microphone). ``position_quantum_m``: microphone positions are
     rounded to this before simulating (cache key). ``victim_*``: defaults for ``world.victims``.
+    ``diffraction``: add the paths bent over/around an obstacle that blocks the direct sound or a
+    first-order wall reflection (ISO 9613-2 barrier attenuation, see :mod:`.diffraction`).
     """
 
     fs: int = 16000
@@ -62,6 +65,7 @@ class AcousticConfig:
     sensor: SensorConfig = field(default_factory=SensorConfig)
     seed: int = 0
     rir_cache_size: int = 32
+    diffraction: bool = True
     victim_sound: str = "calls"
     victim_level_db_spl: float = PAPER_LEVEL_DB_SPL
 
@@ -124,6 +128,8 @@ class AcousticSimulator:
                 f"room RT60 up to {self.rt60_bands.max():.2f} s exceeds max_rir_s={cfg.max_rir_s} s: "
                 "the reverberant tail is truncated", stacklevel=2)
         self.rir_length = self.N_PRE + int(np.ceil(min(need, cfg.max_rir_s) * cfg.fs))
+        self._boxes = BoxSet.from_boxes([b for _, b in scene.boxes])
+        self._wall_reflection = np.array([m.reflection_amplitude for m in scene.room_materials])
         self._sensors: dict[int, Sensor] = {}
         self._images: OrderedDict[tuple, ImageSet] = OrderedDict()
         self._tails: dict[int, list[tuple[np.ndarray, DiffuseTail]]] = {}
@@ -178,6 +184,15 @@ class AcousticSimulator:
         first_missing = self.scene.first_missing_distance(src, centre, self.ism_order, cfg.c) if cfg.late_reverb else np.inf
         return imgs, first_missing
 
+    def _diffracted(self, k: int, imgs: ImageSet, centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Virtual sources of the diffracted arrivals of source ``k`` at the array ``centre`` for the direct
+        path and first-order wall reflections the image-source set lacks (blocked by an obstacle)."""
+        src = np.asarray(self._sources[k].position)
+        cand, _, _ = room_images(src, self.scene.size, self._wall_reflection)
+        low = imgs.positions[imgs.order <= 1]
+        present = np.array([low.size > 0 and bool(np.any(np.linalg.norm(low - c, axis=1) < 1e-3)) for c in cand])
+        return diffracted_arrivals(src, centre, self._boxes, self.scene.size, self._wall_reflection, present)
+
     def _tail(self, k: int, mics: np.ndarray) -> DiffuseTail:
         # Rigid array: one tail per source serves every pose (matched on inter-mic distances within 2 mm).
         d = np.linalg.norm(mics[:, None] - mics[None], axis=-1)
@@ -208,10 +223,14 @@ class AcousticSimulator:
         out = np.zeros((len(self._sources), mics.shape[0], L))
         for k, src in enumerate(self._sources):
             imgs, first_missing = self._image_set(k, centre)
-            if imgs.positions.shape[0]:
-                d_max = float(np.max(np.linalg.norm(imgs.positions - centre, axis=1))) + 0.2
+            positions, reflection = imgs.positions, imgs.reflection
+            if cfg.diffraction and len(self._boxes):
+                dpos, dref = self._diffracted(k, imgs, centre)
+                positions, reflection = np.vstack([positions, dpos]), np.vstack([reflection, dref])
+            if positions.shape[0]:
+                d_max = float(np.max(np.linalg.norm(positions - centre, axis=1))) + 0.2
                 l_early = min(L, n_pre + int(np.ceil(d_max / cfg.c * cfg.fs)) + FRAC_HALF_TAPS + 2 * n_pre)
-                out[k, :, :l_early] = early_rir(imgs.positions, imgs.reflection, mics, cfg.fs, cfg.c, n_pre, l_early)
+                out[k, :, :l_early] = early_rir(positions, reflection, mics, cfg.fs, cfg.c, n_pre, l_early)
             if cfg.late_reverb and self.rt60_bands.max() > 0:
                 tail = self._tail(k, mics)
                 start = int(round(first_missing / cfg.c * cfg.fs)) if np.isfinite(first_missing) else L
