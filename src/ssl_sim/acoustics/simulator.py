@@ -284,9 +284,11 @@ class AcousticSimulator:
             s = self._sensors[n_mics] = Sensor(self.config.sensor, n_mics, self.config.seed)
         return s
 
-    def listen(self, mic_positions_world, duration_s: float, t0: float = 0.0) -> np.ndarray:
+    def listen(self, mic_positions_world, duration_s: float, t0: float = 0.0,
+               extra_pressure: np.ndarray | None = None) -> np.ndarray:
         """ADC output (n_mics, n) for simulation time ``[t0, t0 + duration_s)``, ``n = round(duration_s * fs)``:
-        int16 (default) or float32 per ``config.sensor.output``. ``mic_positions_world`` (n_mics, 3) m."""
+        int16 (default) or float32 per ``config.sensor.output``. ``mic_positions_world`` (n_mics, 3) m.
+        ``extra_pressure`` (n_mics, n) Pa: sound rendered elsewhere (the robot's ego-noise) added before the sensor."""
         cfg = self.config
         if not np.isfinite(duration_s) or duration_s <= 0:
             raise ValueError(f"duration_s: expected a duration > 0 s, got {duration_s}")
@@ -307,6 +309,10 @@ class AcousticSimulator:
                 b = int(np.ceil(times.max())) + h + 2
                 pch = self.pressure(mics, a, b - a, channels=chans)
                 p[list(chans)] = Sensor.interpolate(pch, a, times)
+        if extra_pressure is not None:
+            if np.shape(extra_pressure) != p.shape:
+                raise ValueError(f"extra_pressure: expected shape {p.shape} (n_mics, n) Pa, got {np.shape(extra_pressure)}")
+            p = p + extra_pressure
         return sensor.digitise(p, n0)
 
     def listen_pose(self, pose: RobotPose, duration_s: float, t0: float = 0.0, mount: ArrayMount | None = None) -> np.ndarray:

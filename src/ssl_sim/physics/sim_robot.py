@@ -94,6 +94,7 @@ class SimRobot:
         self._wheel_qpos = np.array([m.jnt_qposadr[m.joint(j).id] for j in rm.WHEEL_JOINTS])
         self._wheel_dof = np.array([m.jnt_dofadr[m.joint(j).id] for j in rm.WHEEL_JOINTS])
         self._mics = np.array([m.site(rm.mic_site(i)).id for i in range(config.array.n_mics)])
+        self._motors = np.array([m.geom(f"motor{i}_body").id for i in range(3)])
         self._robot_bodies = self._subtree(self._base)
         self._floor = m.geom(FLOOR_GEOM).id
         self._bumper = m.geom(rm.BUMPER_GEOM).id
@@ -232,6 +233,11 @@ class SimRobot:
         """World positions of the microphones (n_mics, 3), m, from the model's mic sites."""
         self._sync()
         return self.data.site_xpos[self._mics].copy()
+
+    def motor_positions(self) -> np.ndarray:
+        """World positions of the three gear motors' centres (3, 3), m (ego-noise sources)."""
+        self._sync()
+        return self.data.geom_xpos[self._motors].copy()
 
     def array_pose(self) -> tuple[np.ndarray, np.ndarray]:
         """Array frame in the world: (origin (3,), rotation (3, 3) whose columns are the array axes)."""
