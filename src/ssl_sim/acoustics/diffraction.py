@@ -125,26 +125,25 @@ class DiffractedPath:
     attenuation_db: np.ndarray
 
 
-def _point_on_edge(s: np.ndarray, r: np.ndarray, a: np.ndarray, b: np.ndarray, extra: float = 0.0) -> np.ndarray:
-    """The point on segment a-b where the shortest path ``s -> edge -> r`` bends (unfolded about the edge
-    line, ``extra`` m added to r's distance from it: the rest of a two-edge path)."""
+def _points_on_edges(s, r, a: np.ndarray, b: np.ndarray, extra=0.0) -> np.ndarray:
+    """The points on segments ``a[i]-b[i]`` ((k, 3) each) where the shortest paths ``s -> edge -> r`` bend
+    (unfolded about each edge line; ``extra`` m added to r's distance from it: the rest of a two-edge
+    path). ``s``, ``r``: (3,) or (k, 3) world m."""
     d = b - a
-    ln = float(np.linalg.norm(d))
-    u = d / ln
-    ss, sr = (s - a) @ u, (r - a) @ u
-    rs = float(np.linalg.norm(s - a - ss * u))
-    rr = float(np.linalg.norm(r - a - sr * u)) + extra
-    t = ss + (sr - ss) * rs / max(rs + rr, 1e-12)
-    return a + np.clip(t, 0.0, ln) * u
+    ln = np.linalg.norm(d, axis=1)
+    u = d / ln[:, None]
+    ss, sr = np.sum((s - a) * u, axis=1), np.sum((r - a) * u, axis=1)
+    rs = np.linalg.norm(s - a - ss[:, None] * u, axis=1)
+    rr = np.linalg.norm(r - a - sr[:, None] * u, axis=1) + extra
+    t = ss + (sr - ss) * rs / np.maximum(rs + rr, 1e-12)
+    return a + np.clip(t, 0.0, ln)[:, None] * u
 
 
-def _closed(p: np.ndarray, q: np.ndarray, room_size: np.ndarray) -> bool:
-    """Whether the edge p-q lies on a room surface."""
-    for ax in range(3):
-        for v in (0.0, room_size[ax]):
-            if abs(p[ax] - v) < _CLOSED_TOL_M and abs(q[ax] - v) < _CLOSED_TOL_M:
-                return True
-    return False
+def _closed(a: np.ndarray, b: np.ndarray, room_size: np.ndarray) -> np.ndarray:
+    """Whether each edge ``a[i]-b[i]`` lies on a room surface (k,)."""
+    on = [(np.abs(a[:, ax] - v) < _CLOSED_TOL_M) & (np.abs(b[:, ax] - v) < _CLOSED_TOL_M)
+          for ax in range(3) for v in (0.0, room_size[ax])]
+    return np.any(on, axis=0)
 
 
 def diffracted_paths(source: np.ndarray, receiver: np.ndarray, boxes: BoxSet, room_size,
@@ -161,35 +160,42 @@ def diffracted_paths(source: np.ndarray, receiver: np.ndarray, boxes: BoxSet, ro
     shrink = np.zeros(len(boxes))
     shrink[k] = _SHRINK_M
     a_all, b_all = boxes.edges(k)
-    open_edge = np.array([not _closed(a, b, size) for a, b in zip(a_all, b_all)])
+    open_edge = ~_closed(a_all, b_all, size)
 
-    def clear(points: list[np.ndarray]) -> bool:
-        pts = np.array([s, *points, r])  # s or r may be a mirror image outside the room; edges may not
-        if not np.all((pts[1:-1] > -1e-6) & (pts[1:-1] < size + 1e-6)):
-            return False
-        return not boxes.segments_hit(pts[:-1], pts[1:], shrink).any()
+    def clear(chains: list[np.ndarray]) -> np.ndarray:
+        """Whether each path s -> chains[0][i] -> chains[1][i] ... -> r is clear; edge points in the room
+        (s or r may be mirror images outside it)."""
+        m = chains[0].shape[0]
+        inside = np.all([np.all((c > -1e-6) & (c < size + 1e-6), axis=1) for c in chains], axis=0)
+        nodes = [np.broadcast_to(s, (m, 3)), *chains, np.broadcast_to(r, (m, 3))]
+        p0, p1 = np.concatenate(nodes[:-1]), np.concatenate(nodes[1:])
+        blocked = boxes.segments_hit(p0, p1, shrink).any(axis=1).reshape(len(nodes) - 1, m).any(axis=0)
+        return inside & ~blocked
 
     out: list[DiffractedPath] = []
+    idx = np.flatnonzero(open_edge)
     single_ok = np.zeros(12, bool)
-    for i in np.flatnonzero(open_edge):
-        e = _point_on_edge(s, r, a_all[i], b_all[i])
-        if clear([e]):
-            single_ok[i] = True
-            length = float(np.linalg.norm(e - s) + np.linalg.norm(r - e))
-            out.append(DiffractedPath(e[None], length, straight, 0.0,
+    if idx.size:
+        e = _points_on_edges(s, r, a_all[idx], b_all[idx])
+        ok = clear([e])
+        single_ok[idx[ok]] = True
+        for p in e[ok]:
+            length = float(np.linalg.norm(p - s) + np.linalg.norm(r - p))
+            out.append(DiffractedPath(p[None], length, straight, 0.0,
                                       barrier_attenuation_db(length - straight, freqs_hz)))
     for i, j in _FACE_PAIRS:
         if not (open_edge[i] and open_edge[j]) or single_ok[i] or single_ok[j]:
             continue
         sep = float(np.linalg.norm(a_all[j] - a_all[i]))
-        for first, second in ((i, j), (j, i)):
-            e1 = _point_on_edge(s, r, a_all[first], b_all[first], extra=sep)
-            e2 = _point_on_edge(e1, r, a_all[second], b_all[second])
-            if clear([e1, e2]):
-                length = float(np.linalg.norm(e1 - s) + np.linalg.norm(e2 - e1) + np.linalg.norm(r - e2))
-                out.append(DiffractedPath(np.array([e1, e2]), length, straight, sep,
-                                          barrier_attenuation_db(length - straight, freqs_hz, sep)))
-                break
+        first, second = np.array([i, j]), np.array([j, i])  # over the pair in either order
+        e1 = _points_on_edges(s, r, a_all[first], b_all[first], extra=sep)
+        e2 = _points_on_edges(e1, r, a_all[second], b_all[second])
+        ok = clear([e1, e2])
+        if ok.any():
+            q = int(np.flatnonzero(ok)[0])
+            length = float(np.linalg.norm(e1[q] - s) + np.linalg.norm(e2[q] - e1[q]) + np.linalg.norm(r - e2[q]))
+            out.append(DiffractedPath(np.array([e1[q], e2[q]]), length, straight, sep,
+                                      barrier_attenuation_db(length - straight, freqs_hz, sep)))
     return out
 
 

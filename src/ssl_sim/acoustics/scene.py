@@ -260,6 +260,20 @@ class AcousticScene:
                 )
         return p
 
+    def inside_air_all(self, points, margin: float = 0.0) -> bool:
+        """Whether all ``points`` (n, 3) (world, m) are finite, in the room and outside every modelled obstacle,
+        with ``margin`` (m) clearance (vectorised :meth:`check_point` without the error message)."""
+        p = np.asarray(points, float).reshape(-1, 3)
+        if not np.all(np.isfinite(p)) or not np.all((p >= margin) & (p <= self.size - margin)):
+            return False
+        if not self.boxes:
+            return True
+        c = np.array([b.center for _, b in self.boxes])
+        r = np.array([b.rotation for _, b in self.boxes])
+        h = np.array([b.size for _, b in self.boxes]) / 2 + margin
+        local = np.einsum("bji,nbj->nbi", r, p[:, None, :] - c[None])
+        return not np.any(np.all(np.abs(local) <= h[None], axis=-1))
+
     def inside_air(self, point, margin: float = 0.0) -> bool:
         p = np.asarray(point, float)
         if not np.all((p >= margin) & (p <= self.size - margin)):

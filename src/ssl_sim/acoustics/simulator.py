@@ -49,6 +49,8 @@ class AcousticConfig:
     rounded to this before simulating (cache key). ``victim_*``: defaults for ``world.victims``.
     ``diffraction``: add the paths bent over/around an obstacle that blocks the direct sound or a
     first-order wall reflection (ISO 9613-2 barrier attenuation, see :mod:`.diffraction`).
+    ``noise_loop_s``: if set, the ambient field and the sensor self-noise repeat with this period (rounded
+    up to 8192-sample frames, at most 16 s): computed once, then cached - the env's fast fidelity.
     """
 
     fs: int = 16000
@@ -66,6 +68,7 @@ class AcousticConfig:
     seed: int = 0
     rir_cache_size: int = 32
     diffraction: bool = True
+    noise_loop_s: float | None = None
     victim_sound: str = "calls"
     victim_level_db_spl: float = PAPER_LEVEL_DB_SPL
 
@@ -78,23 +81,39 @@ class AcousticConfig:
             raise ValueError(f"AcousticConfig.max_rir_s: expected > 0 s, got {self.max_rir_s}")
         if self.rt60_s is not None and (not np.isfinite(self.rt60_s) or self.rt60_s < 0):
             raise ValueError(f"AcousticConfig.rt60_s: expected None or a time >= 0 s, got {self.rt60_s}")
+        if self.noise_loop_s is not None and not 0 < self.noise_loop_s <= 16.384:
+            raise ValueError(f"AcousticConfig.noise_loop_s: expected None or 0 < s <= 16.384, got {self.noise_loop_s}")
         if self.position_quantum_m <= 0 or self.visibility_grid_m <= 0:
             raise ValueError("AcousticConfig.position_quantum_m and visibility_grid_m must be > 0 m")
 
 
 class _PoseRirs:
-    """RIRs (n_sources, n_mics, L) at one pose and their spectra per FFT size."""
+    """RIRs (n_sources, n_mics, L) at one pose, before the sources' burial filters, and their spectra per
+    FFT size with the burial filters applied (zero-phase: one multiplication in the convolution's domain)."""
 
-    def __init__(self, rirs: np.ndarray) -> None:
-        self.rirs = rirs
+    def __init__(self, rirs: np.ndarray, sources: Sequence[SoundSource], fs: int) -> None:
+        self.rirs, self.sources, self.fs = rirs, sources, fs
         self.spectra: dict[int, np.ndarray] = {}
 
     def spectrum(self, n_fft: int) -> np.ndarray:
         s = self.spectra.get(n_fft)
         if s is None:
             s = sfft.rfft(self.rirs, n_fft, axis=-1)
+            freqs = np.fft.rfftfreq(n_fft, 1.0 / self.fs)
+            for k, src in enumerate(self.sources):
+                resp = src.burial_response(freqs)
+                if resp is not None:
+                    s[k] *= resp
             self.spectra = {n_fft: s}  # one block size at a time is the normal case
         return s
+
+    def buried_rirs(self) -> np.ndarray:
+        """The RIRs with the burial filters applied (time domain)."""
+        if not any(src.buried > 0 for src in self.sources):
+            return self.rirs
+        L = self.rirs.shape[-1]
+        n_fft = sfft.next_fast_len(L)
+        return sfft.irfft(self.spectrum(n_fft), n_fft, axis=-1)[..., :L]
 
 
 class AcousticSimulator:
@@ -132,6 +151,7 @@ class AcousticSimulator:
         self._wall_reflection = np.array([m.reflection_amplitude for m in scene.room_materials])
         self._sensors: dict[int, Sensor] = {}
         self._images: OrderedDict[tuple, ImageSet] = OrderedDict()
+        self._first_missing: dict[tuple, float] = {}
         self._tails: dict[int, list[tuple[np.ndarray, DiffuseTail]]] = {}
         self._rirs: OrderedDict[bytes, _PoseRirs] = OrderedDict()
         self._sources: list[SoundSource] = []
@@ -140,7 +160,9 @@ class AcousticSimulator:
                                      level_db_spl=cfg.victim_level_db_spl) for i, v in enumerate(world.victims)]
         for s in sources:
             self.add_source(s)
-        self.ambient = DiffuseNoiseField(cfg.ambient, cfg.fs, cfg.seed, cfg.c) if cfg.ambient is not None else None
+        self._loop = None if cfg.noise_loop_s is None else int(np.ceil(cfg.noise_loop_s * cfg.fs / DiffuseNoiseField.FRAME))
+        self.ambient = (DiffuseNoiseField(cfg.ambient, cfg.fs, cfg.seed, cfg.c, loop_frames=self._loop)
+                        if cfg.ambient is not None else None)
 
     # ------------------------------------------------------------------ sources
     @property
@@ -181,7 +203,16 @@ class AcousticSimulator:
             self._images[key] = imgs
             if len(self._images) > 512:
                 self._images.popitem(last=False)
-        first_missing = self.scene.first_missing_distance(src, centre, self.ism_order, cfg.c) if cfg.late_reverb else np.inf
+        # Where the tail starts (path length of the first reflection the model misses), at the visibility grid
+        # point: within 5 cm (0.15 ms) of the exact start, and cached with the image set.
+        fm_key = (k, tuple(np.round(self._quantise(centre, cfg.visibility_grid_m), 6)))
+        first_missing = self._first_missing.get(fm_key) if cfg.late_reverb else np.inf
+        if first_missing is None:
+            first_missing = self.scene.first_missing_distance(src, self._quantise(centre, cfg.visibility_grid_m),
+                                                              self.ism_order, cfg.c)
+            self._first_missing[fm_key] = first_missing
+            if len(self._first_missing) > 512:
+                self._first_missing.pop(next(iter(self._first_missing)))
         return imgs, first_missing
 
     def _diffracted(self, k: int, imgs: ImageSet, centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -208,7 +239,7 @@ class AcousticSimulator:
     def impulse_responses(self, mic_positions_world) -> np.ndarray:
         """RIRs (n_sources, n_mics, rir_length) in Pa per (Pa at 1 m); index 0 is ``N_PRE`` samples before emission."""
         mics = self._check_mics(mic_positions_world)
-        return self._pose_rirs(mics).rirs
+        return self._pose_rirs(mics).buried_rirs()
 
     def _pose_rirs(self, mics: np.ndarray) -> _PoseRirs:
         cfg = self.config
@@ -236,11 +267,7 @@ class AcousticSimulator:
                 start = int(round(first_missing / cfg.c * cfg.fs)) if np.isfinite(first_missing) else L
                 g = tail_gain(out[k, :, n_pre:], tail.expected_energy, start, cfg.fs)
                 out[k, :, n_pre:] += g * tail.tail
-            resp = src.burial_response(np.fft.rfftfreq(sfft.next_fast_len(L), 1.0 / cfg.fs))
-            if resp is not None:
-                n_fft = sfft.next_fast_len(L)
-                out[k] = sfft.irfft(sfft.rfft(out[k], n_fft, axis=-1) * resp, n_fft, axis=-1)[:, :L]
-        pr = _PoseRirs(out)
+        pr = _PoseRirs(out, tuple(self._sources), cfg.fs)
         self._rirs[key] = pr
         if len(self._rirs) > cfg.rir_cache_size:
             self._rirs.popitem(last=False)
@@ -251,8 +278,9 @@ class AcousticSimulator:
         mics = np.asarray(mic_positions_world, float)
         if mics.ndim != 2 or mics.shape[1] != 3 or mics.shape[0] < 1:
             raise ValueError(f"mic_positions_world: expected shape (n_mics, 3) in world metres, got {mics.shape}")
-        for i, p in enumerate(mics):
-            self.scene.check_point(p, f"mic_positions_world[{i}]", margin=0.005)
+        if not self.scene.inside_air_all(mics, margin=0.005):  # fast path; the loop names the bad one
+            for i, p in enumerate(mics):
+                self.scene.check_point(p, f"mic_positions_world[{i}]", margin=0.005)
         return mics
 
     def pressure(self, mic_positions_world, n0: int, n: int, channels: Sequence[int] | None = None,
@@ -281,7 +309,7 @@ class AcousticSimulator:
     def _sensor(self, n_mics: int) -> Sensor:
         s = self._sensors.get(n_mics)
         if s is None:
-            s = self._sensors[n_mics] = Sensor(self.config.sensor, n_mics, self.config.seed)
+            s = self._sensors[n_mics] = Sensor(self.config.sensor, n_mics, self.config.seed, loop_chunks=self._loop)
         return s
 
     def listen(self, mic_positions_world, duration_s: float, t0: float = 0.0,

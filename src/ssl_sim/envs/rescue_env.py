@@ -52,6 +52,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from robot.kinematics import forward_kinematics, integrate_pose, twist_to_wheels
 from robot.odometry import Odometry, wrap_angle
 from ssl_core.localizer import Localizer, LocalizerConfig
 from ssl_sim.acoustics import AcousticConfig, AcousticSimulator, AmbientNoise
@@ -179,7 +180,7 @@ class SSLRescueEnv(gym.Env):
                 sources = sc.sources(world, seed=acoustic_seed, fs=FS)
                 ac = sc.acoustic_config(seed=acoustic_seed)
                 order = min(ac.ism_order, FIDELITY_ACOUSTICS[cfg.fidelity]["ism_order"])
-                ac = replace(ac, ism_order=order)
+                ac = replace(ac, ism_order=order, noise_loop_s=FIDELITY_ACOUSTICS[cfg.fidelity].get("noise_loop_s"))
                 found_radius = sc.success_radius_m
             else:
                 if cfg.scene is not None:
@@ -264,11 +265,17 @@ class SSLRescueEnv(gym.Env):
         collided = False
         physics_error = None
         try:
-            robot.set_twist(*(a * self._twist_scale))
-            collided |= self._advance(cfg.control_s)
-            pose_drive = self._odo.update(robot.wheel_odometry())
-            robot.stop()
-            collided |= self._advance(cfg.settle_s)
+            if cfg.fidelity == "fast":
+                collided |= self._drive_kinematic(a * self._twist_scale, cfg.control_s)
+                pose_drive = self._odo.update(robot.wheel_odometry())
+                p = robot.pose()
+                robot.place(p.x, p.y, p.yaw, advance_s=cfg.settle_s)  # stops at once: nothing to settle
+            else:
+                robot.set_twist(*(a * self._twist_scale))
+                collided |= self._advance(cfg.control_s)
+                pose_drive = self._odo.update(robot.wheel_odometry())
+                robot.stop()
+                collided |= self._advance(cfg.settle_s)
             obs, collided_listening = self._listen_and_observe(pose0, pose_drive, collided)
             collided |= collided_listening
         except PhysicsError as exc:
@@ -308,6 +315,30 @@ class SSLRescueEnv(gym.Env):
             hit |= robot.bumper()
             self._track_path()
         return hit
+
+    def _drive_kinematic(self, twist: np.ndarray, duration: float) -> bool:
+        """Fast fidelity: move the robot along the commanded twist (after the drive's saturation) as a rigid
+        body, no dynamics, checking the bumper every ``_CHECK_DT``; at a contact the robot stays at its last
+        free pose for the rest of the step. Trades: no acceleration, wheel slip or rollers, no climbing over
+        debris (it glides level over climbable debris), no tipping. Returns whether the bumper closed."""
+        robot = self._ep.robot
+        wheels = twist_to_wheels(twist, robot.params)
+        body = forward_kinematics(wheels, robot.params)
+        n = max(1, int(math.ceil(duration / _CHECK_DT - 1e-9)))
+        dt = duration / n
+        p = robot.pose()
+        pose = np.array([p.x, p.y, p.yaw])
+        angles = robot.wheel_odometry().wheel_angles
+        for k in range(n):
+            new, new_angles = integrate_pose(pose, body, dt), angles + wheels * dt
+            robot.place(*new, wheel_angles=new_angles, advance_s=dt)
+            if robot.bumper():
+                robot.place(*pose, wheel_angles=angles, advance_s=(n - k - 1) * dt)  # back off, wait out the step
+                self._track_path()
+                return True
+            pose, angles = new, new_angles
+            self._track_path()
+        return False
 
     def _track_path(self) -> None:
         xy = self._robot_xy()

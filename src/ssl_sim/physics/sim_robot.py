@@ -162,6 +162,22 @@ class SimRobot:
     def wheel_commands(self) -> np.ndarray:
         return self.data.ctrl[:3].copy()
 
+    def place(self, x: float, y: float, yaw: float, wheel_angles=None, advance_s: float = 0.0) -> None:
+        """Kinematic mode: put the base at ``(x, y)`` (world m), heading ``yaw`` (rad), level at its current
+        height, everything at rest; set the wheel encoders to ``wheel_angles`` (rad) if given; advance the
+        clock by ``advance_s`` without dynamics. Positions, sensors and contacts are then those of the new pose."""
+        m, d = self.model, self.data
+        adr = m.jnt_qposadr[m.joint("base_free").id]
+        d.qpos[adr:adr + 2] = (x, y)
+        d.qpos[adr + 3:adr + 7] = (np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2))
+        if wheel_angles is not None:
+            d.qpos[self._wheel_qpos] = np.asarray(wheel_angles, float)
+        d.qvel[:] = 0.0
+        d.time += float(advance_s)
+        self._requested = float(d.time)
+        mujoco.mj_forward(m, d)
+        self._stale = False
+
     # -- physics -----------------------------------------------------------------------------------
     def step(self, duration: float | None = None) -> None:
         """Advance by ``duration`` s (one physics step if None). Durations that are not whole
