@@ -221,7 +221,7 @@ class AcousticSimulator:
         src = np.asarray(self._sources[k].position)
         cand, _, _ = room_images(src, self.scene.size, self._wall_reflection)
         low = imgs.positions[imgs.order <= 1]
-        present = np.array([low.size > 0 and bool(np.any(np.linalg.norm(low - c, axis=1) < 1e-3)) for c in cand])
+        present = (np.linalg.norm(cand[:, None] - low[None], axis=-1) < 1e-3).any(axis=1)
         return diffracted_arrivals(src, centre, self._boxes, self.scene.size, self._wall_reflection, present)
 
     def _tail(self, k: int, mics: np.ndarray) -> DiffuseTail:

@@ -61,6 +61,7 @@ from ssl_sim.envs.config import FIDELITY_ACOUSTICS, EnvConfig
 from ssl_sim.envs.navigation import GeodesicMap
 from ssl_sim.envs.voices import episode_victims
 from ssl_sim.physics import PhysicsError, SimRobot, generate_world, load_scene
+from ssl_sim.physics.robot_model import RobotModelConfig
 from ssl_sim.world import World
 
 FS = 16000
@@ -84,6 +85,20 @@ class _Episode:
     sources: list
     found_radius: float
     shortest_path: float
+
+    def clearance(self, x: float, y: float) -> float:
+        """Horizontal distance (m) from (x, y) to the nearest room wall or non-climbable obstacle footprint."""
+        boxes = [b for b in self.world.obstacles if not b.climbable]
+        lx, ly = self.world.room.size[:2]
+        d = min(x, y, lx - x, ly - y)
+        if boxes:
+            c = np.array([b.center[:2] for b in boxes])
+            yaw = np.array([b.yaw for b in boxes])
+            h = np.array([b.size[:2] for b in boxes]) / 2
+            dx, dy = x - c[:, 0], y - c[:, 1]
+            local = np.abs(np.stack([np.cos(yaw) * dx + np.sin(yaw) * dy, -np.sin(yaw) * dx + np.cos(yaw) * dy], 1))
+            d = min(d, float(np.min(np.linalg.norm(np.maximum(local - h, 0.0), axis=1))))
+        return d
 
 
 _LOCALIZERS: dict[LocalizerConfig, Localizer] = {}
@@ -324,10 +339,12 @@ class SSLRescueEnv(gym.Env):
         robot = self._ep.robot
         wheels = twist_to_wheels(twist, robot.params)
         body = forward_kinematics(wheels, robot.params)
-        n = max(1, int(math.ceil(duration / _CHECK_DT - 1e-9)))
-        dt = duration / n
         p = robot.pose()
         pose = np.array([p.x, p.y, p.yaw])
+        # Far from everything (more than the bumper's reach plus the distance driven): one move, no checks.
+        reach = RobotModelConfig().bumper_radius + 0.01 + float(np.hypot(*body[:2])) * duration
+        n = 1 if self._ep.clearance(p.x, p.y) > reach else max(1, int(math.ceil(duration / _CHECK_DT - 1e-9)))
+        dt = duration / n
         angles = robot.wheel_odometry().wheel_angles
         for k in range(n):
             new, new_angles = integrate_pose(pose, body, dt), angles + wheels * dt
