@@ -61,6 +61,10 @@ def _record(args: argparse.Namespace) -> int:
     for s in truth["sources"]:
         print(f"  {s['name']:<16} {s['kind']:<10} azimuth {s['azimuth_deg'][0]:7.1f} deg  elevation "
               f"{s['elevation_deg'][0]:6.1f} deg  {s['distance_m'][0]:5.2f} m  sounding {100 * s['sounding_fraction']:.0f} %")
+    rt = truth["rt60_s"]
+    k = rt["octave_hz"].index(1000.0)
+    print(f"room RT60 at 1 kHz: {rt['simulated'][k]:.2f} s simulated (the scene's materials alone: "
+          f"{rt['scene_materials'][k]:.2f} s)")
     print(f"try: ssl-locate {out} --array cube8 --sources {max(1, len(truth['sources']))}")
     return 0
 

@@ -82,6 +82,13 @@ def record_scenario(scenario: Scenario, out_wav: str | Path, seed: int | None = 
     wavfile.write(out_wav, fs, np.ascontiguousarray(audio.T))
 
     truth = _truth(sc, hal, poses, fs, n_total, frame_s)
+    from ssl_sim.acoustics.materials import OCTAVE_CENTERS_HZ
+
+    truth["rt60_s"] = {  # Eyring, per octave band: what the simulation used and what the scene's materials give
+        "octave_hz": list(OCTAVE_CENTERS_HZ),
+        "simulated": np.round(hal.acoustics.rt60_bands, 3).tolist(),
+        "scene_materials": np.round(hal.acoustics.scene_materials_rt60(), 3).tolist(),
+    }
     truth.update(wav=out_wav.name, fs=fs, n_channels=int(audio.shape[0]), duration_s=n_total / fs,
                  scenario=sc.name, seed=sc.seed, robot_start={"x": world.robot_start[0], "y": world.robot_start[1],
                                                              "yaw_rad": world.robot_start[2]})

@@ -164,6 +164,10 @@ class AcousticSimulator:
         self.ambient = (DiffuseNoiseField(cfg.ambient, cfg.fs, cfg.seed, cfg.c, loop_frames=self._loop)
                         if cfg.ambient is not None else None)
 
+    def scene_materials_rt60(self) -> np.ndarray:
+        """Eyring RT60 (s) per octave band that the world's own surface materials give (whatever ``rt60_s`` says)."""
+        return AcousticScene(self.world, self.config.min_obstacle_extent_m).rt60(self.config.c)
+
     # ------------------------------------------------------------------ sources
     @property
     def sources(self) -> tuple[SoundSource, ...]:

@@ -4,7 +4,8 @@ One step (``EnvConfig``, defaults in brackets): the normalised action ``a`` in [
 scaled to a body twist ``(a0 * max_speed, a1 * max_speed, a2 * max_turn_rate)`` (robot frame:
 +x forward, +y left, CCW positive; [0.3 m/s, 1.2 rad/s]) and sent through
 ``robot.kinematics.twist_to_wheels`` (inverse kinematics, direction-keeping saturation) to the
-MuJoCo robot for ``control_s`` [0.5 s]; the robot stops, settles ``settle_s`` [0.1 s] and listens
+MuJoCo robot for ``control_s`` [0.5 s] (``fidelity="fast"``: the robot moves kinematically along that
+twist, no dynamics, see ``_drive_kinematic``); the robot stops, settles ``settle_s`` [0.1 s] and listens
 ``listen_s`` [0.25 s] standing still (``SimAudioSource``: acoustic simulation at the microphone
 positions of the physics model); ``ssl_core``'s SRP-PHAT localizer turns that audio into the
 observation. A step is 0.85 s of simulated time.
