@@ -138,18 +138,21 @@ class EgoNoise:
             return np.zeros((mics.shape[0], n))
         out = np.zeros((mics.shape[0], n))
         hist = self._hist if contiguous else np.zeros((3, 0))
-        length = 0
         rirs = []
-        for m, pos in enumerate(np.asarray(motor_positions_world, float)):
+        for pos in np.asarray(motor_positions_world, float):
             imgs = sim.scene.image_sources(pos, mics.mean(axis=0), cfg.ism_order, c)
+            if imgs.positions.shape[0] == 0:  # no path from this motor (hidden by an obstacle): not heard
+                rirs.append(None)
+                continue
             d_max = float(np.max(np.linalg.norm(imgs.positions[:, None] - mics[None], axis=-1)))
             L = n_pre + int(np.ceil(d_max / c * fs)) + FRAC_HALF_TAPS + 1
             rirs.append(early_rir(imgs.positions, imgs.reflection, mics, fs, c, n_pre, L))
-            length = max(length, L)
-        keep = length  # history needed: the RIR's causal part plus the pre-emission part
-        full = np.concatenate([np.zeros((3, max(0, keep - hist.shape[1]))), hist[:, -keep:] if keep else hist, src],
-                              axis=1)
+        # History kept before the block: the longest RIR (its causal part plus the pre-emission part).
+        keep = max((h.shape[1] for h in rirs if h is not None), default=1)
+        full = np.concatenate([np.zeros((3, max(0, keep - hist.shape[1]))), hist[:, -keep:], src], axis=1)
         for m, h in enumerate(rirs):
+            if h is None:
+                continue
             y = ss.fftconvolve(full[m][None, :], h, axes=1)  # (n_mics, len)
             # Sample j of the block is at index keep + j of `full`; the RIR's emission instant is at n_pre.
             out += y[:, keep + n_pre: keep + n_pre + n]
