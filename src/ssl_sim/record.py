@@ -24,6 +24,7 @@ from pathlib import Path
 import numpy as np
 from scipy.io import wavfile
 
+from ssl_sim.acoustics.materials import OCTAVE_CENTERS_HZ
 from ssl_sim.backends import array_frame_directions
 from ssl_sim.scenario import Scenario, ScenarioError
 
@@ -81,9 +82,7 @@ def record_scenario(scenario: Scenario, out_wav: str | Path, seed: int | None = 
     out_wav.parent.mkdir(parents=True, exist_ok=True)
     wavfile.write(out_wav, fs, np.ascontiguousarray(audio.T))
 
-    truth = _truth(sc, hal, poses, fs, n_total, frame_s)
-    from ssl_sim.acoustics.materials import OCTAVE_CENTERS_HZ
-
+    truth = _truth(hal, poses, fs, n_total, frame_s)
     truth["rt60_s"] = {  # Eyring, per octave band: what the simulation used and what the scene's materials give
         "octave_hz": list(OCTAVE_CENTERS_HZ),
         "simulated": np.round(hal.acoustics.rt60_bands, 3).tolist(),
@@ -97,7 +96,7 @@ def record_scenario(scenario: Scenario, out_wav: str | Path, seed: int | None = 
     return truth
 
 
-def _truth(sc: Scenario, hal, poses, fs: int, n_total: int, frame_s: float) -> dict:
+def _truth(hal, poses, fs: int, n_total: int, frame_s: float) -> dict:
     """Per-source truth time series on frames of ``frame_s`` (array pose interpolated between the
     pose samples the HAL recorded during each block)."""
     nf = int(round(frame_s * fs))
