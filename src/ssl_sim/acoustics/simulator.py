@@ -35,6 +35,10 @@ from .sensor import Sensor, SensorConfig
 from .sources import PAPER_LEVEL_DB_SPL, SoundSource, victim_source
 
 
+#: Default RIR length cap (s).
+DEFAULT_MAX_RIR_S = 4.0
+
+
 @dataclass(frozen=True)
 class AcousticConfig:
     """Simulation settings.
@@ -59,7 +63,7 @@ class AcousticConfig:
     ism_budget: float = 3e7
     late_reverb: bool = True
     rt60_s: float | None = None
-    max_rir_s: float = 4.0
+    max_rir_s: float = DEFAULT_MAX_RIR_S
     visibility_grid_m: float = 0.05
     position_quantum_m: float = 1e-4
     min_obstacle_extent_m: float = 0.05
@@ -147,6 +151,10 @@ class AcousticSimulator:
                 f"room RT60 up to {self.rt60_bands.max():.2f} s exceeds max_rir_s={cfg.max_rir_s} s: "
                 "the reverberant tail is truncated", stacklevel=2)
         self.rir_length = self.N_PRE + int(np.ceil(min(need, cfg.max_rir_s) * cfg.fs))
+        # The diffuse tail is drawn at the length the default cap would give and then cut to rir_length, so
+        # a shorter max_rir_s (the env's fast fidelity) truncates the same realisation instead of drawing another.
+        self._tail_draw_length = max(self.rir_length - self.N_PRE,
+                                     int(np.ceil(min(need, DEFAULT_MAX_RIR_S) * cfg.fs)))
         self._boxes = BoxSet.from_boxes([b for _, b in scene.boxes])
         self._wall_reflection = np.array([m.reflection_amplitude for m in scene.room_materials])
         self._sensors: dict[int, Sensor] = {}
@@ -236,7 +244,9 @@ class AcousticSimulator:
                 return t
         cfg = self.config
         rng = np.random.default_rng([cfg.seed & 0xFFFFFFFF, 0x7A11, k])
-        t = DiffuseTail(self.rt60_bands, self.scene.volume, cfg.fs, cfg.c, self.rir_length - self.N_PRE, rng, mics)
+        t = DiffuseTail(self.rt60_bands, self.scene.volume, cfg.fs, cfg.c, self._tail_draw_length, rng, mics)
+        L = self.rir_length - self.N_PRE
+        t.tail, t.expected_energy, t.length = t.tail[:, :L], t.expected_energy[:L], L
         self._tails.setdefault(k, []).append((d, t))
         return t
 

@@ -13,18 +13,14 @@ FIDELITIES = ("fast", "full")
 #: AcousticConfig fields per fidelity. Both keep the same room model, diffuse late tail (same
 #: random realisation: its length depends on the RT60, not on the order), ambient noise and
 #: sensor; the fast mode stops the exact image-source model at order 2 instead of 3 (the tail
-#: fills the rest with the same expected energy), cuts the impulse responses where the tail has
-#: decayed by ``FAST_RIR_DECAY_DB`` (0.45 s at the default RT60 of 0.6 s) and loops a 10.24 s
-#: realisation of the ambient noise and sensor self-noise (computed once per episode, then cached; same statistics). The
+#: fills the rest with the same expected energy) and loops a 10.24 s realisation of the ambient
+#: noise and sensor self-noise (computed once per episode, then cached; same statistics). The
 #: fast mode also moves the robot kinematically (``SSLRescueEnv._drive_kinematic``). Measured:
 #: ``benchmarks/bench_env.py``.
 FIDELITY_ACOUSTICS: dict[str, dict[str, Any]] = {
     "full": {"ism_order": 3},
     "fast": {"ism_order": 2, "noise_loop_s": 10.24},
 }
-
-#: Fast fidelity: impulse responses end where the reverberant tail is this far down (dB).
-FAST_RIR_DECAY_DB = 45.0
 
 VICTIM_SOUNDS = ("continuous", "calls", "moans", "shouts", "knocks", "mixed")
 

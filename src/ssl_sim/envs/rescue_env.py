@@ -56,9 +56,9 @@ from gymnasium import spaces
 from robot.kinematics import forward_kinematics, integrate_pose, twist_to_wheels
 from robot.odometry import Odometry, wrap_angle
 from ssl_core.localizer import Localizer, LocalizerConfig
-from ssl_sim.acoustics import AcousticConfig, AcousticScene, AcousticSimulator, AmbientNoise
+from ssl_sim.acoustics import AcousticConfig, AcousticSimulator, AmbientNoise
 from ssl_sim.backends import SimAudioSource
-from ssl_sim.envs.config import FAST_RIR_DECAY_DB, FIDELITY_ACOUSTICS, EnvConfig
+from ssl_sim.envs.config import FIDELITY_ACOUSTICS, EnvConfig
 from ssl_sim.envs.navigation import GeodesicMap
 from ssl_sim.envs.voices import episode_victims
 from ssl_sim.physics import PhysicsError, SimRobot, generate_world, load_scene
@@ -100,19 +100,6 @@ class _Episode:
             local = np.abs(np.stack([np.cos(yaw) * dx + np.sin(yaw) * dy, -np.sin(yaw) * dx + np.cos(yaw) * dy], 1))
             d = min(d, float(np.min(np.linalg.norm(np.maximum(local - h, 0.0), axis=1))))
         return d
-
-
-def _fast_rir_length(world: World, ac: AcousticConfig) -> float:
-    """Fast fidelity's RIR length (s): where the reverberant tail has decayed by ``FAST_RIR_DECAY_DB``
-    (Eyring RT60 of the config's ``rt60_s`` or of the surface materials, slowest band) after the longest
-    direct path across the room; never longer than ``ac.max_rir_s``."""
-    if ac.rt60_s is not None:
-        rt = ac.rt60_s
-    else:
-        bands = AcousticScene(world, ac.min_obstacle_extent_m).rt60(ac.c)
-        rt = float(np.max(np.where(np.isfinite(bands), bands, 0.0)))
-    diag = float(np.linalg.norm(world.room.size))
-    return min(ac.max_rir_s, max(0.05, rt * FAST_RIR_DECAY_DB / 60.0 + diag / ac.c))
 
 
 _LOCALIZERS: dict[LocalizerConfig, Localizer] = {}
@@ -222,8 +209,6 @@ class SSLRescueEnv(gym.Env):
                 ac = AcousticConfig(seed=acoustic_seed, rt60_s=cfg.rt60_s,
                                     ambient=AmbientNoise(cfg.noise_db_spl, "hvac"), **FIDELITY_ACOUSTICS[cfg.fidelity])
                 found_radius = cfg.found_radius_m
-            if cfg.fidelity == "fast":
-                ac = replace(ac, max_rir_s=_fast_rir_length(world, ac))
             robot = SimRobot(world)
             acoustics = AcousticSimulator(world, ac, sources)
         audio = SimAudioSource(robot, acoustics)
