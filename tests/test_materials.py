@@ -55,3 +55,26 @@ def test_concrete_shoebox_rt60_matches_sabine_and_eyring(f):
     print(f"{f:.0f} Hz: measured T20 {t:.2f} s, Sabine {sabine:.2f} s, Eyring {eyring:.2f} s")
     assert t == pytest.approx(eyring, rel=0.15)
     assert t == pytest.approx(sabine, rel=0.15)
+
+
+def test_open_walls_absorb_like_holes():
+    """Brick walls with 20 % of their area open (doorways, broken windows: alpha = 1), concrete floor and
+    ceiling: the decay follows Eyring with the area-weighted absorption of wall and hole."""
+    size = (5.0, 4.0, 3.0)
+    f, freq = 0.2, 1000.0
+    world = World(room=Room(size, "brickwork", "concrete", "concrete", wall_open_fraction=f))
+    a_wall = f + (1 - f) * _database_alpha("brickwork", freq)
+    a_conc = _database_alpha("rough_concrete", freq)
+    s_wall = 2 * (size[0] + size[1]) * size[2]
+    s_fc = 2 * size[0] * size[1]
+    mean_a = (s_wall * a_wall + s_fc * a_conc) / (s_wall + s_fc)
+    eyring = 24 * math.log(10) * math.prod(size) / (343.0 * (s_wall + s_fc) * -math.log(1 - mean_a))
+    sim = AcousticSimulator(world, AcousticConfig(ambient=None, seed=4, max_rir_s=2.0),
+                            sources=[SoundSource((1.2, 1.1, 1.3), ShapedNoise(FS, 0))])
+    t = _t20(sim.impulse_responses(np.array([[3.7, 2.6, 1.5]]))[0, 0], freq)
+    assert t == pytest.approx(eyring, rel=0.15)
+
+
+def test_open_fraction_is_validated():
+    with pytest.raises(ValueError, match="wall_open_fraction"):
+        Room((5.0, 4.0, 3.0), wall_open_fraction=1.0)

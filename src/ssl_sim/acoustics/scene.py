@@ -146,6 +146,12 @@ class AcousticScene:
                 raise ValueError(f"{where}: {exc}") from None
 
         wall_m = mat(room.wall_material, "world.room.wall_material")
+        f_open = float(getattr(room, "wall_open_fraction", 0.0))
+        if f_open > 0 and material_override is None:
+            # Openings spread over the walls: the area-weighted absorption of wall and hole (alpha = 1).
+            wall_m = AcousticMaterial(f"{wall_m.name} ({100 * f_open:.0f} % open)",
+                                      tuple(f_open + (1 - f_open) * np.asarray(wall_m.absorption)),
+                                      wall_m.scattering, wall_m.description)
         floor_m = mat(room.floor_material, "world.room.floor_material")
         ceil_m = mat(room.ceiling_material, "world.room.ceiling_material")
         self.room_materials = (wall_m, wall_m, wall_m, wall_m, floor_m, ceil_m)
