@@ -18,10 +18,11 @@ obstacle box blocks them (the image-source engine then drops them). For the bloc
 tried; a path counts if none of its legs passes through any box (the diffracting one shrunk by 1 mm,
 so legs may touch its edges) and its edges are not resting on the floor, a wall or the ceiling
 (closed edges do not diffract). A two-edge path is used only where neither of its single-edge paths
-is. Not modelled: diffraction of higher-order reflections and obstacle-face reflections, paths
-bending around two different boxes, diffraction of paths that are not blocked (ISO's negative-z
-correction), and a reflected path blocked on its first leg (before the wall) is treated the same
-as on its last leg only when the last leg is clear.
+is. A reflected path is bent around the box on the leg it blocks (before the wall: the receiver is
+mirrored in the wall; after it: the image source is the source); blocked on both legs it is dropped.
+Not modelled: diffraction of higher-order reflections and obstacle-face reflections, paths bending
+around two different boxes, diffraction of unblocked paths (ISO's negative-z correction). Wavelengths
+use c = 343 m/s.
 """
 from __future__ import annotations
 
