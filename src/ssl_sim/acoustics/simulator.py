@@ -8,7 +8,8 @@ at a fixed pose, so consecutive listen steps of a continuing voice are continuou
 Pipeline per listen step:
 1. room impulse responses per (source, microphone) - early part from the image-source model
    (pyroomacoustics engine on the room + obstacle faces), late part a diffuse tail with the
-   room's Eyring decay (see :mod:`.rir`); cached per pose (positions rounded to 0.1 mm);
+   room's Eyring decay (see :mod:`.rir`); paths an obstacle blocks bend over/around its edges
+   (:mod:`.diffraction`); cached per pose (positions rounded to 0.1 mm);
 2. each source's time-keyed signal, scaled to its level (Pa at 1 m), convolved (FFT) with its RIRs;
 3. diffuse ambient noise (:mod:`.noise`);
 4. the sensor chain (:mod:`.sensor`): self-noise, gain mismatch, device timing, 16-bit ADC.
