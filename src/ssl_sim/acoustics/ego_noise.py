@@ -42,7 +42,8 @@ class EgoNoiseConfig:
 
     ``level_db_spl_1m``: SPL at 1 m of one motor at ``rated_speed`` (wheel, rad/s). ``min_speed``:
     below this wheel speed (rad/s) a motor is silent. ``tonal_share``: fraction of the power in the mesh
-    tone and its harmonics. ``ism_order``: reflection order of the paths to the microphones."""
+    tone and its harmonics. ``ism_order``: reflection order of the paths to the microphones. ``seed``:
+    combined with the acoustic simulation's seed (tone phases, broadband noise)."""
 
     level_db_spl_1m: float = 40.0
     rated_speed: float = 20.0
@@ -86,8 +87,9 @@ class EgoNoise:
         self.sim = sim
         self.config = cfg = config or EgoNoiseConfig()
         fs = sim.config.fs
-        self._noise = [ShapedNoise(fs, cfg.seed, "pink", stream=0xE60 + m) for m in range(3)]
-        rng = np.random.default_rng([cfg.seed & 0xFFFFFFFF, 0xE60])
+        seed = (int(cfg.seed) * 7919 + int(sim.config.seed)) & 0xFFFFFFFF  # one realisation per simulation seed
+        self._noise = [ShapedNoise(fs, seed, "pink", stream=0xE60 + m) for m in range(3)]
+        rng = np.random.default_rng([seed, 0xE60])
         self._phase0 = rng.uniform(0, 2 * np.pi, 3)
         self._spread = np.array([0.99, 1.0, 1.01])[:, None]  # per-motor speed tolerance
         self._phase = self._phase0.copy()
