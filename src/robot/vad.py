@@ -84,24 +84,35 @@ class SileroVad:
             raise ValueError(f"audio: expected one array per stream ({len(streams)}), got {len(audio)}")
         for s, x in zip(streams, audio):
             x = np.asarray(x, np.float32).ravel()
-            s.pending = np.concatenate([s.pending, x])
+            s.pending = np.concatenate([s.pending, x]) if len(s.pending) else x
         frame, ctx = self.frame, self._context
         counts = [len(s.pending) // frame for s in streams]
-        out: list[list[float]] = [[] for _ in streams]
-        for k in range(max(counts, default=0)):
-            idx = [i for i, c in enumerate(counts) if c > k]
-            frames = np.stack([streams[i].pending[k * frame:(k + 1) * frame] for i in idx])
-            inp = np.concatenate([np.stack([streams[i].context for i in idx]), frames], axis=1)
-            state = np.concatenate([streams[i].state for i in idx], axis=1)
-            prob, state = self._session.run(None, {"input": inp, "state": state, "sr": self._sr})
-            for j, i in enumerate(idx):
-                streams[i].state = state[:, j:j + 1].copy()
-                streams[i].context = inp[j, -ctx:].copy()
-                out[i].append(float(prob[j, 0]))
-        for s, c, o in zip(streams, counts, out):
+        n = max(counts, default=0)
+        probs = np.zeros((len(streams), n), np.float32)
+        # Model inputs of every frame at once, (frames, streams, context + frame): each frame preceded by
+        # the last samples of the one before. A stream with fewer frames is padded; its padded frames'
+        # outputs and states are discarded.
+        if n:
+            pending = np.zeros((len(streams), n * frame), np.float32)
+            for i, (s, c) in enumerate(zip(streams, counts)):
+                pending[i, :c * frame] = s.pending[:c * frame]
+            frames = pending.reshape(len(streams), n, frame)
+            contexts = np.concatenate([np.stack([s.context for s in streams])[:, None], frames[:, :-1, -ctx:]], axis=1)
+            inputs = np.ascontiguousarray(np.concatenate([contexts, frames], axis=2).transpose(1, 0, 2))
+            state = np.concatenate([s.state for s in streams], axis=1)
+            for k in range(n):
+                prob, new_state = self._session.run(None, {"input": inputs[k], "state": state, "sr": self._sr})
+                probs[:, k] = prob[:, 0]
+                for i, s in enumerate(streams):
+                    if counts[i] == k + 1:   # this stream's last whole frame: keep its state and context
+                        s.state, s.context = new_state[:, i:i + 1].copy(), inputs[k, i, -ctx:].copy()
+                state = new_state
+        out = []
+        for i, (s, c) in enumerate(zip(streams, counts)):
             s.pending = s.pending[c * frame:]
             s.n_frames += c
-        return [np.asarray(o) for o in out]
+            out.append(probs[i, :c].astype(float))
+        return out
 
     def probabilities(self, x: np.ndarray, fs: int = SAMPLE_RATE) -> np.ndarray:
         """Speech probability per 32 ms frame of one whole mono float signal at ``fs`` Hz (resampled to

@@ -55,6 +55,7 @@ class StftStream:
 
     FRAME, HOP = 512, 256
     WINDOW = np.sqrt(np.hanning(FRAME + 1)[:-1])
+    _WINDOW_ENERGY = float(np.sum(WINDOW**2))
 
     def __init__(self, n_channels: int) -> None:
         self._pending = np.zeros((n_channels, self.HOP))  # input not yet in a whole frame
@@ -86,7 +87,7 @@ class StftStream:
         total = 2 * p.sum(axis=-1) - p[..., 0]
         if spec.shape[-1] == cls.FRAME // 2 + 1:
             total -= p[..., -1]  # the Nyquist bin, like 0 Hz, has no mirror
-        return total.mean(axis=-1) / (cls.FRAME * np.sum(cls.WINDOW**2)) if spec.shape[-2] else np.zeros(spec.shape[:-2])
+        return total.mean(axis=-1) / (cls.FRAME * cls._WINDOW_ENERGY) if spec.shape[-2] else np.zeros(spec.shape[:-2])
 
 
 class OverlapAdd:
@@ -182,6 +183,13 @@ class MpdrBeamformer:
         self._since = 0          # frames since _inv was computed
         self._w_h = None         # conjugated weights (bins, k, m) for _w_dirs
         self._w_dirs = np.zeros((0, 3))
+        self._decays: dict[int, np.ndarray] = {}
+
+    def _decay(self, n: int) -> np.ndarray:
+        """Weights in R of n new frames, oldest first."""
+        if n not in self._decays:
+            self._decays[n] = (1 - self._forget) * self._forget ** np.arange(n - 1, -1, -1)
+        return self._decays[n]
 
     def process(self, spec: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """``spec`` (n_mics, n_frames, bins) from ``StftStream``; ``directions`` (k, 3) -> beams
@@ -190,9 +198,11 @@ class MpdrBeamformer:
         n = spec.shape[1]
         nb = len(self.freqs)
         if n:
-            s = spec[:, :, :nb].transpose(2, 0, 1)                             # (bins, mics, frames)
-            decay = (1 - self._forget) * self._forget ** np.arange(n - 1, -1, -1)
-            self._cov = self._forget**n * self._cov + (s * decay) @ s.conj().transpose(0, 2, 1)
+            # (using every other frame only, which do not overlap, halved this but measurably weakened the
+            # machine's cancellation in the room cases of tests/test_hearing.py)
+            s = np.ascontiguousarray(spec[:, :, :nb].transpose(2, 0, 1))      # (bins, mics, frames)
+            self._cov *= self._forget**n
+            self._cov += (s * self._decay(n)) @ s.conj().transpose(0, 2, 1)
             self._weight = self._forget**n * self._weight + (1 - self._forget**n)
             self._since += n
         if len(d) == 0 or n == 0:
