@@ -124,7 +124,8 @@ class Hearing:
             raise ValueError(f"sample_rate: expected {SAMPLE_RATE} Hz, got {sample_rate}")
         self.config = config
         positions = np.asarray(mic_positions, float)
-        self._stft = StftStream(len(positions))
+        # single precision from the STFT to the VAD (which takes float32): half the memory traffic
+        self._stft = StftStream(len(positions), np.float32)
         self.vad = vad or SileroVad(sample_rate=VAD_RATE)
         if self.vad.sample_rate != VAD_RATE:
             raise ValueError(f"vad: expected a SileroVad at {VAD_RATE} Hz, got {self.vad.sample_rate} Hz")

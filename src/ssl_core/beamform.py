@@ -57,24 +57,29 @@ class StftStream:
     WINDOW = np.sqrt(np.hanning(FRAME + 1)[:-1])
     _WINDOW_ENERGY = float(np.sum(WINDOW**2))
 
-    def __init__(self, n_channels: int) -> None:
-        self._pending = np.zeros((n_channels, self.HOP))  # input not yet in a whole frame
+    def __init__(self, n_channels: int, dtype: type = np.float64) -> None:
+        """``dtype``: float64, or float32 for half the memory traffic (spectra then complex64)."""
+        self.dtype = np.dtype(dtype)
+        if self.dtype not in (np.float32, np.float64):
+            raise ValueError(f"dtype: expected float32 or float64, got {self.dtype}")
+        self._pending = np.zeros((n_channels, self.HOP), self.dtype)  # input not yet in a whole frame
+        self._window = self.WINDOW.astype(self.dtype)
 
     def analyse(self, block: np.ndarray) -> np.ndarray:
         """``block`` (n_channels, n) float -> spectra (n_channels, n_frames, FRAME // 2 + 1) of the frames
         completed by it (any block length; n_frames may be 0)."""
-        buf = np.concatenate([self._pending, np.asarray(block, float)], axis=1)
+        buf = np.concatenate([self._pending, np.asarray(block, self.dtype)], axis=1)
         n = (buf.shape[1] - self.FRAME) // self.HOP + 1 if buf.shape[1] >= self.FRAME else 0
         self._pending = buf[:, n * self.HOP:]
         if n == 0:
-            return np.zeros((buf.shape[0], 0, self.FRAME // 2 + 1), complex)
+            return np.zeros((buf.shape[0], 0, self.FRAME // 2 + 1), np.result_type(self.dtype, np.complex64))
         frames = np.lib.stride_tricks.sliding_window_view(buf, self.FRAME, axis=1)[:, :: self.HOP][:, :n]
-        return scipy.fft.rfft(frames * self.WINDOW, axis=-1)
+        return scipy.fft.rfft(frames * self._window, axis=-1)
 
     def skip(self, block: np.ndarray) -> None:
         """Pass over ``block`` (n_channels, n) without analysing it: the next frame starts HOP samples
         before its end."""
-        buf = np.concatenate([self._pending, np.asarray(block, float)], axis=1)
+        buf = np.concatenate([self._pending, np.asarray(block, self.dtype)], axis=1)
         self._pending = buf[:, buf.shape[1] - self.HOP:]
 
     @classmethod
@@ -128,7 +133,8 @@ class OverlapAdd:
             raise ValueError(f"spec: expected at most {first._n // 2} bins (below fs / {2 * first.decimation}) "
                              f"for decimation {first.decimation}, got {spec.shape[-1]}")
         h = first._hop
-        y = scipy.fft.irfft(spec, first._n, axis=-1) * first._window          # (k, frames, n)
+        y = scipy.fft.irfft(spec, first._n, axis=-1)                          # (k, frames, n)
+        y *= first._window
         heads = y[:, :, :h].copy()
         heads[:, 1:] += y[:, :-1, h:]
         for i, o in enumerate(synths):
@@ -177,7 +183,7 @@ class MpdrBeamformer:
         self._update_frames = max(1, int(round(update_s * fs / StftStream.HOP)))
         self._cos_tolerance = float(np.cos(steer_tolerance_rad))
         m = len(self.positions)
-        self._cov = np.zeros((len(self.freqs), m, m), complex)
+        self._cov: np.ndarray | None = None   # (bins, m, m), in the spectra's precision (first process)
         self._weight = 0.0       # total weight in _cov (bias correction while it fills)
         self._inv = None         # loaded inverse covariance (bins, m, m)
         self._since = 0          # frames since _inv was computed
@@ -197,27 +203,29 @@ class MpdrBeamformer:
         d = np.atleast_2d(np.asarray(directions, float))
         n = spec.shape[1]
         nb = len(self.freqs)
+        if self._cov is None or self._cov.dtype != spec.dtype:
+            self._cov, self._weight, self._inv = np.zeros((nb, len(self.positions), len(self.positions)), spec.dtype), 0.0, None
         if n:
             # (using every other frame only, which do not overlap, halved this but measurably weakened the
             # machine's cancellation in the room cases of tests/test_hearing.py)
             s = np.ascontiguousarray(spec[:, :, :nb].transpose(2, 0, 1))      # (bins, mics, frames)
             self._cov *= self._forget**n
-            self._cov += (s * self._decay(n)) @ s.conj().transpose(0, 2, 1)
+            self._cov += (s * self._decay(n).astype(s.real.dtype)) @ s.conj().transpose(0, 2, 1)
             self._weight = self._forget**n * self._weight + (1 - self._forget**n)
             self._since += n
         if len(d) == 0 or n == 0:
-            return np.zeros((len(d), n, nb), complex)
+            return np.zeros((len(d), n, nb), spec.dtype)
         if self._inv is None or self._since >= self._update_frames:
             m = len(self.positions)
             cov = self._cov / max(self._weight, 1e-12)
             load = self.loading * np.real(np.trace(cov, axis1=1, axis2=2)) / m + 1e-20
-            self._inv = np.linalg.inv(cov + load[:, None, None] * np.eye(m))
+            self._inv = np.linalg.inv(cov + (load[:, None, None] * np.eye(m)).astype(cov.dtype))
             self._since = 0
             self._w_h = None
         if (self._w_h is None or d.shape != self._w_dirs.shape
                 or np.min(np.sum(d * self._w_dirs, axis=1)) < self._cos_tolerance):
             steer = np.exp(-2j * np.pi * self.freqs[:, None, None]
-                           * arrival_times(self.positions, d, self.sound_speed).T[None])   # (bins, mics, k)
+                           * arrival_times(self.positions, d, self.sound_speed).T[None]).astype(spec.dtype)
             ri_a = self._inv @ steer
             w = ri_a / np.einsum("fmk,fmk->fk", steer.conj(), ri_a)[:, None, :]
             self._w_h, self._w_dirs = w.conj().transpose(0, 2, 1), d.copy()
