@@ -176,7 +176,8 @@ class Hearing:
             states.append(self._state[ids[i]])
         spec = beams[sounding]
         power = spec.real**2 + spec.imag**2
-        weights = np.stack([st.noise.weights(p) for st, p in zip(states, power)])
+        floors = np.stack([st.noise.update(p) for st, p in zip(states, power)])   # (k, bins)
+        weights = states[0].noise.gains(power, floors[:, None])
         # share of each beam's power above its noise floor (an SNR: the talker's own beam, whose MPDR
         # cancels the machine, has more of it than the machine's beam she leaks into)
         excess = (power * weights).sum(axis=(1, 2)) / np.maximum(power.sum(axis=(1, 2)), 1e-30)

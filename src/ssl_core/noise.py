@@ -31,10 +31,18 @@ class NoiseFloor:
 
     def weights(self, power: np.ndarray) -> np.ndarray:
         """Weights in [0, 1] for one chunk of band power ``(frames, bins)``; updates the floor first."""
+        return self.gains(power, self.update(power))
+
+    def update(self, power: np.ndarray) -> np.ndarray:
+        """Take one chunk of band power ``(frames, bins)`` into the floor; returns the floor ``(bins,)``."""
         mean = power.mean(axis=0)
         if self._means is None or self._means.shape[1:] != mean.shape:
             self._means, self._count = np.empty((self._memory, *mean.shape), mean.dtype), 0
         self._means[self._count % self._memory] = mean
         self._count += 1
-        floor = self._means[: min(self._count, self._memory)].min(axis=0)
+        return self._means[: min(self._count, self._memory)].min(axis=0)
+
+    def gains(self, power: np.ndarray, floor: np.ndarray) -> np.ndarray:
+        """``w = clip(1 - g N / P, 0, 1)`` for band power ``power`` and a floor broadcasting against it
+        (several floors' chunks at once: ``(k, frames, bins)`` with ``(k, 1, bins)``)."""
         return np.clip(1.0 - self.over_subtraction * floor / np.maximum(power, np.finfo(power.dtype).tiny), 0.0, 1.0)
