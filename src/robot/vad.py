@@ -9,10 +9,10 @@ export without ``If`` nodes: at 16 kHz its probabilities equal those of the 16 k
 (``silero_vad_16k_op15.onnx``, used before) within 5e-7, and it also runs at 8 kHz.
 
 Cost (one core, onnxruntime 1.32, x86-64, process time per second of audio, one 32 ms frame per call;
-benchmarks/bench_voice.py): 16 kHz 3.5 ms for one stream, 8.8 ms for four batched; 8 kHz 2.7 and 5.7 ms
-(the 16 kHz-only export 3.8 / 9.1). A call costs ~50 us of overhead plus ~30 us (16 kHz) or ~16 us
-(8 kHz) per stream. On the data set's dev and test parts the 8 kHz model calls the same 1 s chunks
-speech as the 16 kHz one (speech 100 %, every non-speech category 0 %).
+benchmarks/bench_voice.py): 16 kHz 3.5 ms for one stream, 8.8 ms for four batched; 8 kHz 2.8 and 5.8 ms
+(the 16 kHz-only export 4.3 / 9.9). A call costs ~60 us plus ~55 us (16 kHz) or ~30 us (8 kHz) per
+stream. On the data set's dev and test parts the 8 kHz model calls the same 1 s chunks speech as the
+16 kHz one (speech 100 %, every non-speech category 0 %; tests/test_voice.py checks the test part).
 
 Streaming and batched: every stream (one beam per tracked source) keeps its own LSTM state and
 its leftover samples; all streams with a whole frame pending go through the network in ONE call
@@ -65,8 +65,8 @@ class SileroVad:
         opts.intra_op_num_threads = threads  # its matrices are tiny: more threads cost CPU, gain nothing
         opts.inter_op_num_threads = 1
         opts.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
-        # (graph optimisation levels basic / extended / all and thread spinning on or off measured the
-        # same cost within 3 %: benchmarks/bench_voice.py history in the README)
+        # (no / basic / all graph optimisations, memory pattern on or off, thread spinning on or off:
+        # the same cost within 3 %; 2 intra-op threads double it: benchmarks/bench_voice.py)
         opts.log_severity_level = 3
         self._session = ort.InferenceSession(str(model_path), opts, providers=["CPUExecutionProvider"])
         self.sample_rate = sample_rate
