@@ -57,7 +57,7 @@ class TrackEvidence:
     direction: np.ndarray          # (3,) unit vector, array frame (the track's)
     time: float                    # s, stream time of the end of the block
     voice_probability: float       # accumulated per-track P(voice) (0..1); a pause keeps it
-    level_db: float                # beam level toward the track (dB re full-scale sine)
+    level_db: float                # beam level toward the track below 4 kHz (dB re full-scale sine), last listened block
     activity: float                # the track's activity
 
 
@@ -76,7 +76,8 @@ class HearingConfig:
     vad_on_s: float = 0.5          # the chain listens vad_on_s in every vad_period_s (all tracks at once):
     vad_period_s: float = 1.0      # half the cost. Room cases (README, "Cost"): 0.5 s in 1 s as good as
                                    # continuous; 1 s in 2 s, 0.4 in 1, 0.5 in 1.5 or 0.5 in 2 fall short
-    beam_update_s: float = 0.5     # MPDR inverse covariance (and weights) refreshed this often
+    beam_update_s: float = 0.5     # MPDR inverse covariance (and weights) refreshed every 0.5 s of listening
+                                   # (1 s lost windows in the room cases; README, "Cost")
 
     def __post_init__(self) -> None:
         for name in ("rise_per_s", "fall_per_s", "max_log_odds"):
