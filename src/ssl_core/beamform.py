@@ -123,7 +123,7 @@ class OverlapAdd:
         self._tail = np.zeros(self._hop)
 
     @staticmethod
-    def synthesise_all(synths: "list[OverlapAdd]", spec: np.ndarray) -> np.ndarray:
+    def synthesise_all(synths: list[OverlapAdd], spec: np.ndarray) -> np.ndarray:
         """One inverse FFT for several streams of equal ``decimation``: ``spec`` (k, n_frames, bins), row i
         continuing ``synths[i]`` -> (k, n_frames * HOP // decimation) samples."""
         if not synths or spec.shape[1] == 0:
@@ -157,7 +157,8 @@ class MpdrBeamformer:
     ``max_freq_hz``: beam only the bins below it (``process`` returns those bins); the covariance,
     its inverse and the weights shrink with them (0-4 kHz: half the bins, half the cost).
     The loaded inverse is refreshed every ``update_s`` (R changes over ``memory_s``, not per frame) and
-    the weights only then or when a direction moves by more than ``steer_tolerance_rad``.
+    the weights only then or when a direction moves by more than ``steer_tolerance_rad`` (0.5 deg moves
+    a delay across the 15 cm cube's 0.21 m diagonal by <= 5.3 us: <= 0.13 rad of phase at 4 kHz).
     """
 
     def __init__(self, positions: np.ndarray, fs: float, memory_s: float = 3.0, loading: float = 0.1,
