@@ -107,6 +107,11 @@ def test_between_listening_bursts_the_evidence_is_held():
     changes = [k for k in range(1, 20) if ev[k].voice_probability != ev[k - 1].voice_probability]
     assert changes and set(changes) <= set(listened)
     assert ev[-1].voice_probability < 0.2            # steady noise: non-voice within 2 s
+    # blocks as long as the listening period are all heard, each frame counting once: 1 s of steady noise
+    # = ~30 non-speech frames of 32 ms = -1.5 log-odds (P ~0.19; counted double it would be ~0.05)
+    h = Hearing(POS)
+    p = h.update(1e-2 * rng.standard_normal((8, FS)), [t], 1.0)[0].voice_probability
+    assert 0.15 < p < 0.25, p
 
 
 def test_a_dropped_track_is_forgotten_and_config_errors_name_the_field():

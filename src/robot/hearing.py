@@ -142,6 +142,9 @@ class Hearing:
                                          max_freq_hz=VAD_RATE / 2)
         self._state: dict[int, _TrackState] = {}
         self._samples = 0          # stream samples before this block (for the listening duty cycle)
+        self._period = max(1, round(config.vad_period_s * sample_rate))   # listening cycle, samples
+        self._on = max(1, round(config.vad_on_s * sample_rate))
+        self._shares: dict[int, float] = {}   # _heard_share per block length
         self._gap = False          # blocks were skipped since the last listening block
         self._level: dict[int, float] = {}   # beam level (dB) per track id, last listening block
 
@@ -150,7 +153,7 @@ class Hearing:
         x = as_float_audio(block)
         # The whole chain listens in the first vad_on_s of every vad_period_s (stream time), to all tracks
         # at once; in between it only keeps the last samples, and evidence keeps the last listened values.
-        listening = (self._samples / SAMPLE_RATE) % cfg.vad_period_s < cfg.vad_on_s
+        listening = self._samples % self._period < self._on
         self._samples += x.shape[-1]
         ids = [int(t.id) for t in tracks]
         for gone in set(self._state) - set(ids):
@@ -202,14 +205,22 @@ class Hearing:
         n_speech = [int(np.count_nonzero(p >= SPEECH_THRESHOLD)) for p in probs]
         talking = [j for j, n in enumerate(n_speech) if n]
         owner = max(talking, key=lambda j: excess[j], default=None)
-        # each frame heard stands for vad_period_s / vad_on_s frames of the track's sound
-        scale = self.vad.frame_s * cfg.vad_period_s / cfg.vad_on_s
+        # each frame heard stands for the frames not heard beside it
+        scale = self.vad.frame_s / self._heard_share(x.shape[-1])
         step_up, step_down = cfg.rise_per_s * scale, cfg.fall_per_s * scale
         for j, (st, p) in enumerate(zip(states, probs)):
             up = n_speech[j] * step_up if j == owner else 0.0
             down = (len(p) - n_speech[j]) * step_down
             st.log_odds = min(max(st.log_odds + up - down, -cfg.max_log_odds), cfg.max_log_odds)
         return self._evidence(tracks, ids, time)
+
+    def _heard_share(self, block: int) -> float:
+        """Share of blocks of ``block`` samples that start inside the listening time, over a whole cycle
+        (0.5 for 100 ms blocks and the default 0.5 s in 1 s; 1 for blocks as long as the period)."""
+        if block not in self._shares:
+            starts = np.arange(self._period // math.gcd(block, self._period)) * block
+            self._shares[block] = float(np.mean(starts % self._period < self._on))
+        return self._shares[block]
 
     def _evidence(self, tracks: Sequence[Track], ids: list[int], time: float) -> list[TrackEvidence]:
         return [TrackEvidence(i, np.array(t.direction, float), float(time), self.voice_probability(i),
