@@ -8,8 +8,9 @@ beam (the bin weights of ``ssl_core.noise.NoiseFloor``) -> inverse STFT at 8 kHz
 ``TrackEvidence``.
 
 Cost: the chain listens ``vad_on_s`` = 0.5 s in every ``vad_period_s`` = 1 s (all tracks at once;
-in between it only keeps the last samples and the evidence is held). Four sounding tracks cost
-6.0 ms of CPU per second of audio on one core (26 ms before: 16 kHz, every block); Silero alone is
+in between it only keeps the last samples and the evidence is held; the MPDR covariance, noise floors
+and gain follow listening time). Four sounding tracks cost
+6.0-6.4 ms of CPU per second of audio on one core (25-26 ms before: 16 kHz, every block); Silero alone is
 2.6-2.9 ms of it. Listening less (1 s in 2, 0.5 in 1.5, 0.4 in 1) or refreshing the MPDR less often
 lost windows in the room cases of tests/test_hearing.py (README, "Cost").
 
@@ -44,11 +45,11 @@ import numpy as np
 
 from robot.hal import as_float_audio
 from robot.vad import SAMPLE_RATE, SPEECH_THRESHOLD, SileroVad, VadStream
-
-VAD_RATE = 8000  # Hz: the beams are formed below 4 kHz and heard by Silero at 8 kHz (README, "Cost")
 from ssl_core.beamform import FULL_SCALE_SINE_MS, MpdrBeamformer, OverlapAdd, StftStream, level_db
 from ssl_core.noise import NoiseFloor
 from ssl_core.tracking import Track
+
+VAD_RATE = 8000  # Hz: the beams are formed below 4 kHz and heard by Silero at 8 kHz (README, "Cost")
 
 
 @dataclass(frozen=True)
@@ -70,7 +71,8 @@ class HearingConfig:
     vad_level_db: float = -20.0    # automatic gain: the denoised beam is scaled toward this slow level
     max_gain_db: float = 60.0      # for the VAD
     level_tau_s: float = 2.0       # time constant of that slow level
-    noise_memory_s: float = 3.0    # the noise floor's minimum-statistics memory (speech pauses within 3 s)
+    noise_memory_s: float = 3.0    # the noise floor's minimum-statistics memory, in listening time (speech
+                                   # pauses within 3 s)
     noise_min_gain: float = 0.3    # noise suppression's lowest bin gain (-10 dB; 0.1 measured worse: musical
                                    # noise made Silero hear speech in a machine's beam)
     vad_on_s: float = 0.5          # the chain listens vad_on_s in every vad_period_s (all tracks at once):
@@ -239,4 +241,3 @@ class _TrackState:
     synthesis: OverlapAdd
     log_odds: float = 0.0
     slow_db: float | None = None   # slow level of the denoised beam, for the VAD's automatic gain
-    excess: float = 0.0            # share (0..1) of the beam's power above its noise floor, last block
