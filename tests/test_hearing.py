@@ -39,6 +39,29 @@ def test_stft_overlap_add_gives_the_input_back_one_hop_late():
     np.testing.assert_allclose(y[h + 512:], x[1, 512:len(y) - h], atol=1e-12)
 
 
+def test_decimating_overlap_add_gives_every_other_sample_of_a_band_limited_input():
+    # beams below 4 kHz go to Silero at 8 kHz: synthesising only those bins at 8 kHz must give every other
+    # sample of the full-rate synthesis of the same bins, and (tones below 4 kHz) every other input sample
+    t = np.arange(FS) / FS
+    f = np.array([130.0, 710.0, 2450.0, 3400.0])
+    x = np.sin(2 * np.pi * f[:, None] * t + np.arange(4)[:, None]).sum(0)[None].repeat(2, axis=0)
+    st, full, half = StftStream(2), OverlapAdd(), OverlapAdd(2)
+    nb = StftStream.FRAME // 4   # bins below 4 kHz
+    y16, y8 = [], []
+    for i in range(0, FS, 1237):
+        spec = st.analyse(x[:, i:i + 1237])[1]
+        spec[:, nb:] = 0
+        y16.append(full.synthesise(spec))
+        y8.append(half.synthesise(spec[:, :nb]))
+    y16, y8 = np.concatenate(y16), np.concatenate(y8)
+    np.testing.assert_allclose(y8, y16[::2], atol=1e-12)
+    h = StftStream.HOP // 2
+    # (the window's leakage of 3.4 kHz above 4 kHz, cut off with those bins: ~1e-4 of the amplitude)
+    np.testing.assert_allclose(y8[h + 256:], x[1, 512:2 * (len(y8) - h):2], atol=1e-3)
+    with pytest.raises(ValueError, match="spec"):
+        half.synthesise(np.zeros((1, nb + 1), complex))
+
+
 def test_mpdr_passes_the_look_direction_and_cancels_a_louder_plane_wave():
     rng = np.random.default_rng(1)
     s, n = rng.standard_normal(3 * FS), 3 * rng.standard_normal(3 * FS)
@@ -74,6 +97,23 @@ def test_pause_keeps_the_probability_and_classify_uses_the_stated_thresholds():
         VoiceClass.VOICE, VoiceClass.VOICE, VoiceClass.UNKNOWN, VoiceClass.NON_VOICE, VoiceClass.NON_VOICE]
 
 
+def test_between_listening_bursts_the_evidence_is_held():
+    """The chain listens 0.5 s in every 1 s: a burst of noise outside the listening time changes nothing."""
+    h = Hearing(POS)
+    t = _track(3, _unit(0), 1.0)
+    rng = np.random.default_rng(4)
+    ev = [h.update(1e-2 * rng.standard_normal((8, BLOCK)), [t], (k + 1) / 10)[0] for k in range(20)]
+    listened = [k for k in range(20) if (k / 10) % 1.0 < 0.5]
+    changes = [k for k in range(1, 20) if ev[k].voice_probability != ev[k - 1].voice_probability]
+    assert changes and set(changes) <= set(listened)
+    assert ev[-1].voice_probability < 0.2            # steady noise: non-voice within 2 s
+    # blocks as long as the listening period are all heard, each frame counting once: 1 s of steady noise
+    # = ~30 non-speech frames of 32 ms = -1.5 log-odds (P ~0.19; counted double it would be ~0.05)
+    h = Hearing(POS)
+    p = h.update(1e-2 * rng.standard_normal((8, FS)), [t], 1.0)[0].voice_probability
+    assert 0.15 < p < 0.25, p
+
+
 def test_a_dropped_track_is_forgotten_and_config_errors_name_the_field():
     h = Hearing(POS)
     t = _track(1, _unit(0), 1.0)
@@ -85,6 +125,8 @@ def test_a_dropped_track_is_forgotten_and_config_errors_name_the_field():
         HearingConfig(min_activity=2)
     with pytest.raises(ValueError, match="sample_rate"):
         Hearing(POS, 8000)
+    with pytest.raises(ValueError, match="HearingConfig.vad_period_s"):
+        HearingConfig(vad_on_s=1.0, vad_period_s=0.5)
 
 
 # --- reverberant room: a talker and a real machine 6 dB louder ------------------------------------

@@ -36,6 +36,16 @@ def test_test_part_speech_found_and_noise_rejected_per_category(vad):
             assert np.mean(_called_speech(vad, r.samples, chunk_starts(r))) >= 0.9, r.name
 
 
+def test_8k_mode_calls_the_same_test_chunks_speech(vad):
+    """robot.hearing hears its beams at 8 kHz: same chunk decisions as at 16 kHz on the test part."""
+    vad8 = SileroVad(sample_rate=8000)
+    for r in recordings("test"):
+        starts = chunk_starts(r)
+        p8 = vad8.probabilities(r.samples, FS)
+        called8 = [speech_fraction(p8[s // FRAME: s // FRAME + FS // FRAME]) >= CHUNK_SPEECH_FRACTION for s in starts]
+        assert called8 == _called_speech(vad, r.samples, starts), r.name
+
+
 def test_data_set_is_speaker_disjoint_16k_mono_and_small():
     dev = {r.name for r in recordings("dev") if r.category in SPEECH_CATEGORIES}
     test = {r.name for r in recordings("test") if r.category in SPEECH_CATEGORIES}
@@ -68,6 +78,8 @@ def test_other_sample_rates_are_resampled_and_bad_input_is_named(vad):
         vad.process([vad.new_stream()], [])
     with pytest.raises(ValueError, match="threads"):
         SileroVad(threads=0)
+    with pytest.raises(ValueError, match="sample_rate"):
+        SileroVad(sample_rate=44100)
     assert SAMPLE_RATE == 16000
 
 

@@ -1,10 +1,18 @@
 """Voice evidence per tracked source: a beam toward each track, a VAD on each beam, and a
 per-track voice probability accumulated over time.
 
-Data path: 8-channel block -> streaming STFT -> ``ssl_core.beamform.MpdrBeamformer`` (one beam per
-track toward its direction, array frame) -> stationary-noise suppression per beam (the bin weights
-of ``ssl_core.noise.NoiseFloor``) -> inverse STFT -> automatic gain -> ``robot.vad.SileroVad`` (one
-stream per track, batched) -> a log-odds filter per track id -> ``TrackEvidence``.
+Data path: 8-channel block -> streaming STFT (float32) -> ``ssl_core.beamform.MpdrBeamformer`` (one
+beam per track toward its direction, array frame, bins below 4 kHz) -> stationary-noise suppression per
+beam (the bin weights of ``ssl_core.noise.NoiseFloor``) -> inverse STFT at 8 kHz -> automatic gain ->
+``robot.vad.SileroVad`` at 8 kHz (one stream per track, batched) -> a log-odds filter per track id ->
+``TrackEvidence``.
+
+Cost: the chain listens ``vad_on_s`` = 0.5 s in every ``vad_period_s`` = 1 s (all tracks at once;
+in between it only keeps the last samples and the evidence is held; the MPDR covariance, noise floors
+and gain follow listening time). Four sounding tracks cost
+6.0-6.4 ms of CPU per second of audio on one core (25-26 ms before: 16 kHz, every block); Silero alone is
+2.6-2.9 ms of it. Listening less (1 s in 2, 0.5 in 1.5, 0.4 in 1) or refreshing the MPDR less often
+lost windows in the room cases of tests/test_hearing.py (README, "Cost").
 
 Why this front end (``benchmarks/bench_voice.py``, five rooms of RT60 0.6 s with a talker and a real
 machine recording 6 dB louder, both 2 m away): Silero hears her in 26 % of her talking seconds at one
@@ -29,6 +37,7 @@ from the prior after ~1 s.
 from __future__ import annotations
 
 import enum
+import math
 from dataclasses import dataclass
 from typing import Sequence
 
@@ -40,6 +49,8 @@ from ssl_core.beamform import FULL_SCALE_SINE_MS, MpdrBeamformer, OverlapAdd, St
 from ssl_core.noise import NoiseFloor
 from ssl_core.tracking import Track
 
+VAD_RATE = 8000  # Hz: the beams are formed below 4 kHz and heard by Silero at 8 kHz (README, "Cost")
+
 
 @dataclass(frozen=True)
 class TrackEvidence:
@@ -47,7 +58,7 @@ class TrackEvidence:
     direction: np.ndarray          # (3,) unit vector, array frame (the track's)
     time: float                    # s, stream time of the end of the block
     voice_probability: float       # accumulated per-track P(voice) (0..1); a pause keeps it
-    level_db: float                # beam level toward the track (dB re full-scale sine)
+    level_db: float                # beam level toward the track below 4 kHz (dB re full-scale sine), last listened block
     activity: float                # the track's activity
 
 
@@ -60,9 +71,15 @@ class HearingConfig:
     vad_level_db: float = -20.0    # automatic gain: the denoised beam is scaled toward this slow level
     max_gain_db: float = 60.0      # for the VAD
     level_tau_s: float = 2.0       # time constant of that slow level
-    noise_memory_s: float = 3.0    # the noise floor's minimum-statistics memory (speech pauses within 3 s)
+    noise_memory_s: float = 3.0    # the noise floor's minimum-statistics memory, in listening time (speech
+                                   # pauses within 3 s)
     noise_min_gain: float = 0.3    # noise suppression's lowest bin gain (-10 dB; 0.1 measured worse: musical
                                    # noise made Silero hear speech in a machine's beam)
+    vad_on_s: float = 0.5          # the chain listens vad_on_s in every vad_period_s (all tracks at once):
+    vad_period_s: float = 1.0      # half the cost. Room cases (README, "Cost"): 0.5 s in 1 s as good as
+                                   # continuous; 1 s in 2 s, 0.4 in 1, 0.5 in 1.5 or 0.5 in 2 fall short
+    beam_update_s: float = 0.5     # MPDR inverse covariance (and weights) refreshed every 0.5 s of listening
+                                   # (1 s lost windows in the room cases; README, "Cost")
 
     def __post_init__(self) -> None:
         for name in ("rise_per_s", "fall_per_s", "max_log_odds"):
@@ -72,9 +89,11 @@ class HearingConfig:
             raise ValueError(f"HearingConfig.noise_min_gain: expected 0..1, got {self.noise_min_gain}")
         if not self.max_gain_db >= 0:
             raise ValueError(f"HearingConfig.max_gain_db: expected >= 0 dB, got {self.max_gain_db}")
-        for name in ("level_tau_s", "noise_memory_s"):
+        for name in ("level_tau_s", "noise_memory_s", "vad_on_s", "beam_update_s"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"HearingConfig.{name}: expected > 0, got {getattr(self, name)}")
+        if not self.vad_period_s >= self.vad_on_s:
+            raise ValueError(f"HearingConfig.vad_period_s: expected >= vad_on_s ({self.vad_on_s}), got {self.vad_period_s}")
         if not 0 <= self.min_activity <= 1:
             raise ValueError(f"HearingConfig.min_activity: expected 0..1, got {self.min_activity}")
 
@@ -102,77 +121,117 @@ def classify(evidence: TrackEvidence) -> VoiceClass:
 class Hearing:
     """``update(block, tracks, time)`` per audio block -> one ``TrackEvidence`` per given track.
 
-    ``mic_positions`` (n_mics, 3) m, array frame; ``sample_rate`` must be 16 kHz (the VAD's rate).
+    ``mic_positions`` (n_mics, 3) m, array frame; ``sample_rate`` must be 16 kHz (the microphones').
     ``tracks``: the ``ssl_core.tracking.Tracker``'s tracks (only ``id``, ``direction`` and ``activity``
     are used). Tracks are matched by id; the state of an id that is no longer given is dropped (track
-    ids are never reused).
+    ids are never reused). ``vad``: an 8 kHz ``SileroVad`` (the beams are formed below 4 kHz and
+    synthesised at 8 kHz).
     """
 
     def __init__(self, mic_positions: np.ndarray, sample_rate: int = SAMPLE_RATE,
                  config: HearingConfig = HearingConfig(), vad: SileroVad | None = None) -> None:
         if sample_rate != SAMPLE_RATE:
-            raise ValueError(f"sample_rate: expected {SAMPLE_RATE} Hz (the VAD's rate), got {sample_rate}")
+            raise ValueError(f"sample_rate: expected {SAMPLE_RATE} Hz, got {sample_rate}")
         self.config = config
         positions = np.asarray(mic_positions, float)
-        self._stft = StftStream(len(positions))
-        self.beamformer = MpdrBeamformer(positions, sample_rate)
-        self.vad = vad or SileroVad()
+        # single precision from the STFT to the VAD (which takes float32): half the memory traffic
+        self._stft = StftStream(len(positions), np.float32)
+        self.vad = vad or SileroVad(sample_rate=VAD_RATE)
+        if self.vad.sample_rate != VAD_RATE:
+            raise ValueError(f"vad: expected a SileroVad at {VAD_RATE} Hz, got {self.vad.sample_rate} Hz")
+        self._decimation = sample_rate // VAD_RATE
+        self.beamformer = MpdrBeamformer(positions, sample_rate, update_s=config.beam_update_s,
+                                         max_freq_hz=VAD_RATE / 2)
         self._state: dict[int, _TrackState] = {}
+        self._samples = 0          # stream samples before this block (for the listening duty cycle)
+        self._period = max(1, round(config.vad_period_s * sample_rate))   # listening cycle, samples
+        self._on = max(1, round(config.vad_on_s * sample_rate))
+        self._shares: dict[int, float] = {}   # _heard_share per block length
+        self._gap = False          # blocks were skipped since the last listening block
+        self._level: dict[int, float] = {}   # beam level (dB) per track id, last listening block
 
     def update(self, block: np.ndarray, tracks: Sequence[Track], time: float) -> list[TrackEvidence]:
         cfg = self.config
         x = as_float_audio(block)
-        dt = x.shape[-1] / SAMPLE_RATE
-        directions = np.array([np.asarray(t.direction, float) for t in tracks]).reshape(-1, 3)
-        beams = self.beamformer.process(self._stft.analyse(x), directions)        # (k, frames, bins)
+        # The whole chain listens in the first vad_on_s of every vad_period_s (stream time), to all tracks
+        # at once; in between it only keeps the last samples, and evidence keeps the last listened values.
+        listening = self._samples % self._period < self._on
+        self._samples += x.shape[-1]
         ids = [int(t.id) for t in tracks]
         for gone in set(self._state) - set(ids):
             del self._state[gone]
-        levels = 10 * np.log10(np.maximum(StftStream.mean_square(beams), 1e-30) / FULL_SCALE_SINE_MS)
+        for gone in set(self._level) - set(ids):
+            del self._level[gone]
+        if not listening:
+            self._stft.skip(x)
+            self._gap = True
+            return self._evidence(tracks, ids, time)
+        if self._gap:   # a new listening burst: the beams fade in, the VAD starts a new frame
+            for st in self._state.values():
+                st.synthesis.reset()
+                st.vad.pending = st.vad.pending[:0]
+            self._gap = False
+        dt = x.shape[-1] / SAMPLE_RATE
+        directions = np.array([np.asarray(t.direction, float) for t in tracks]).reshape(-1, 3)
+        beams = self.beamformer.process(self._stft.analyse(x), directions)        # (k, frames, bins < 4 kHz)
+        if beams.shape[1]:
+            levels = 10 * np.log10(np.maximum(StftStream.mean_square(beams), 1e-30) / FULL_SCALE_SINE_MS)
+            self._level.update(zip(ids, levels.tolist()))
         sounding = [i for i, t in enumerate(tracks) if t.activity >= cfg.min_activity]
-        inputs = []
+        if not sounding or not beams.shape[1]:
+            return self._evidence(tracks, ids, time)
+        memory = max(1, int(round(cfg.noise_memory_s / max(dt, StftStream.HOP / SAMPLE_RATE))))
+        states = []
         for i in sounding:
-            st = self._state.get(ids[i])
-            if st is None:
-                memory = max(1, int(round(cfg.noise_memory_s / max(dt, StftStream.HOP / SAMPLE_RATE))))
-                st = self._state[ids[i]] = _TrackState(self.vad.new_stream(), NoiseFloor(memory), OverlapAdd())
-            spec = beams[i]
-            st.excess = 0.0
-            if len(spec):
-                power = spec.real**2 + spec.imag**2
-                weights = st.noise.weights(power)
-                # share of the beam's power above its noise floor (an SNR: the talker's own beam, whose
-                # MPDR cancels the machine, has more of it than the machine's beam she leaks into)
-                st.excess = float((power * weights).sum() / max(power.sum(), 1e-30))
-                spec = spec * np.maximum(weights, cfg.noise_min_gain)
-            clean = st.synthesis.synthesise(spec)
-            if clean.size:
-                lvl = float(level_db(clean))
-                st.slow_db = lvl if st.slow_db is None else st.slow_db + (lvl - st.slow_db) * (
-                    1 - np.exp(-dt / cfg.level_tau_s))
-                clean = clean * 10 ** (min(cfg.vad_level_db - st.slow_db, cfg.max_gain_db) / 20)
-            inputs.append(clean)
-        probs = self.vad.process([self._state[ids[i]].vad for i in sounding], inputs)
+            if ids[i] not in self._state:
+                self._state[ids[i]] = _TrackState(self.vad.new_stream(), NoiseFloor(memory),
+                                                  OverlapAdd(self._decimation))
+            states.append(self._state[ids[i]])
+        spec = beams[sounding]
+        power = spec.real**2 + spec.imag**2
+        floors = np.stack([st.noise.update(p) for st, p in zip(states, power)])   # (k, bins)
+        weights = states[0].noise.gains(power, floors[:, None])
+        # share of each beam's power above its noise floor (an SNR: the talker's own beam, whose MPDR
+        # cancels the machine, has more of it than the machine's beam she leaks into)
+        excess = (power * weights).sum(axis=(1, 2)) / np.maximum(power.sum(axis=(1, 2)), 1e-30)
+        clean = OverlapAdd.synthesise_all([st.synthesis for st in states],
+                                          spec * np.maximum(weights, cfg.noise_min_gain))
+        follow = 1 - math.exp(-dt / cfg.level_tau_s)
+        for st, lvl, row in zip(states, level_db(clean, axis=-1).tolist(), clean):
+            st.slow_db = lvl if st.slow_db is None else st.slow_db + (lvl - st.slow_db) * follow
+            row *= 10 ** (min(cfg.vad_level_db - st.slow_db, cfg.max_gain_db) / 20)
+        probs = self.vad.process([st.vad for st in states], list(clean))
         # Speech heard in several beams at once goes to the beam in which the largest share of the power
         # stands above its noise floor: a talker leaks into a machine's beam (Silero hears speech far
         # below the noise), but there the machine dominates.
-        n_speech = {i: int(np.count_nonzero(p >= SPEECH_THRESHOLD)) for i, p in zip(sounding, probs)}
-        talking = [i for i in sounding if n_speech[i]]
-        owner = max(talking, key=lambda i: self._state[ids[i]].excess, default=None)
-        step_up, step_down = cfg.rise_per_s * self.vad.frame_s, cfg.fall_per_s * self.vad.frame_s
-        for i, p in zip(sounding, probs):
-            st = self._state[ids[i]]
-            up = n_speech[i] * step_up if i == owner else 0.0
-            down = (len(p) - n_speech[i]) * step_down
-            st.log_odds = float(np.clip(st.log_odds + up - down, -cfg.max_log_odds, cfg.max_log_odds))
-        return [TrackEvidence(ids[i], directions[i].copy(), float(time), self.voice_probability(ids[i]),
-                              float(levels[i]) if len(levels) else -np.inf, float(t.activity))
-                for i, t in enumerate(tracks)]
+        n_speech = [int(np.count_nonzero(p >= SPEECH_THRESHOLD)) for p in probs]
+        talking = [j for j, n in enumerate(n_speech) if n]
+        owner = max(talking, key=lambda j: excess[j], default=None)
+        # each frame heard stands for the frames not heard beside it
+        scale = self.vad.frame_s / self._heard_share(x.shape[-1])
+        step_up, step_down = cfg.rise_per_s * scale, cfg.fall_per_s * scale
+        for j, (st, p) in enumerate(zip(states, probs)):
+            up = n_speech[j] * step_up if j == owner else 0.0
+            down = (len(p) - n_speech[j]) * step_down
+            st.log_odds = min(max(st.log_odds + up - down, -cfg.max_log_odds), cfg.max_log_odds)
+        return self._evidence(tracks, ids, time)
+
+    def _heard_share(self, block: int) -> float:
+        """Share of blocks of ``block`` samples that start inside the listening time, over a whole cycle
+        (0.5 for 100 ms blocks and the default 0.5 s in 1 s; 1 for blocks as long as the period)."""
+        if block not in self._shares:
+            starts = np.arange(self._period // math.gcd(block, self._period)) * block
+            self._shares[block] = float(np.mean(starts % self._period < self._on))
+        return self._shares[block]
+
+    def _evidence(self, tracks: Sequence[Track], ids: list[int], time: float) -> list[TrackEvidence]:
+        return [TrackEvidence(i, np.array(t.direction, float), float(time), self.voice_probability(i),
+                              self._level.get(i, -math.inf), float(t.activity)) for i, t in zip(ids, tracks)]
 
     def voice_probability(self, track_id: int) -> float:
         """Accumulated P(voice) of a track (0.5 for a track never heard sounding)."""
         st = self._state.get(track_id)
-        return float(1.0 / (1.0 + np.exp(-st.log_odds))) if st is not None else 0.5
+        return 1.0 / (1.0 + math.exp(-st.log_odds)) if st is not None else 0.5
 
 
 @dataclass
@@ -182,4 +241,3 @@ class _TrackState:
     synthesis: OverlapAdd
     log_odds: float = 0.0
     slow_db: float | None = None   # slow level of the denoised beam, for the VAD's automatic gain
-    excess: float = 0.0            # share (0..1) of the beam's power above its noise floor, last block
