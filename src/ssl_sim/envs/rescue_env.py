@@ -20,6 +20,11 @@ axes, azimuth CCW from forward, elevation up from horizontal):
   ``power`` normalised SRP in [0, 1], ``level`` the beam level mapped from [-100, 0] dB re full
   scale to [0, 1]; rows past the number of detections are zero.
 - ``detection_mask`` (K,) int8: 1 where the row is a detection.
+- ``detection_voice`` (K,): per detection row, the share (0..1, dimensionless) of the listen window's
+  32 ms frames in which Silero VAD (``robot.vad``, the robot's detector) hears speech in the
+  delay-and-sum beam toward that detection (array frame), the beam first scaled to robot.hearing's VAD
+  level; 0 for rows past the number of detections. Evidence of one step only: the robot's per-track
+  accumulated P(voice) (``robot.hearing``) needs tracks, which this per-step observation does not keep.
 - ``odometry`` (3,): wheel-encoder dead reckoning over the step, ``(dx, dy, dyaw)`` in m, m, rad
   in the robot frame at the start of the step (clipped to +-1 m, +-pi).
 - ``velocity`` (3,): mean body twist from the encoders over the drive phase (m/s, m/s, rad/s),
@@ -54,7 +59,10 @@ import numpy as np
 from gymnasium import spaces
 
 from robot.kinematics import forward_kinematics, integrate_pose, twist_to_wheels
+from robot.hearing import HearingConfig
 from robot.odometry import Odometry, wrap_angle
+from robot.vad import SileroVad, speech_fraction
+from ssl_core.beamform import FULL_SCALE_SINE_MS, beam_signal
 from ssl_core.localizer import Localizer, LocalizerConfig
 from ssl_sim.acoustics import AcousticConfig, AcousticSimulator, AmbientNoise
 from ssl_sim.backends import SimAudioSource
@@ -103,6 +111,28 @@ class _Episode:
 
 
 _LOCALIZERS: dict[LocalizerConfig, Localizer] = {}
+_VADS: list[SileroVad] = []   # one Silero session per process (loading it costs more than a step's VAD)
+
+
+def detection_voice(samples: np.ndarray, positions: np.ndarray, directions: np.ndarray) -> np.ndarray:
+    """Share (0..1) of 32 ms frames in which Silero VAD hears speech in the far-field delay-and-sum beam
+    of ``samples`` (n_mics, n) (int16 or float full scale 1, 16 kHz) toward each unit direction of
+    ``directions`` (k, 3) (array frame; ``positions`` (n_mics, 3) m) -> (k,).
+
+    Each beam is scaled to robot.hearing's VAD level (``HearingConfig.vad_level_db`` re a full-scale sine,
+    gain at most ``max_gain_db``): Silero misses quiet speech (robot.hearing's docstring)."""
+    if not _VADS:
+        _VADS.append(SileroVad())
+    x = np.asarray(samples)
+    x = x / 32768.0 if x.dtype == np.int16 else x.astype(float)
+    hc = HearingConfig()
+    out = np.zeros(len(directions), np.float32)
+    for i, u in enumerate(np.asarray(directions, float).reshape(-1, 3)):
+        beam = beam_signal(x, positions, u, FS)
+        ms = max(float(np.mean(beam**2)), 1e-30)
+        gain_db = min(hc.vad_level_db - 10 * math.log10(ms / FULL_SCALE_SINE_MS), hc.max_gain_db)
+        out[i] = speech_fraction(_VADS[0].probabilities(beam * 10 ** (gain_db / 20), FS))
+    return out
 
 
 def _localizer(cfg: LocalizerConfig) -> Localizer:
@@ -157,6 +187,7 @@ class SSLRescueEnv(gym.Env):
             "srp_map": spaces.Box(-1.0, 1.0, (self.coarse_directions.shape[0],), np.float32),
             "detections": spaces.Box(det_low, np.ones((K, 5), np.float32), dtype=np.float32),
             "detection_mask": spaces.MultiBinary(K),
+            "detection_voice": spaces.Box(0.0, 1.0, (K,), np.float32),
             "odometry": spaces.Box(np.array([-1, -1, -np.pi], np.float32), np.array([1, 1, np.pi], np.float32),
                                    dtype=np.float32),
             "velocity": spaces.Box(np.array([-2, -2, -8], np.float32), np.array([2, 2, 8], np.float32),
@@ -382,10 +413,16 @@ class SSLRescueEnv(gym.Env):
             det[i] = (math.cos(d.azimuth), math.sin(d.azimuth), math.sin(d.elevation), d.power, lvl)
             mask[i] = 1
         np.clip(det, self.observation_space["detections"].low, self.observation_space["detections"].high, out=det)
+        voice = np.zeros(K, np.float32)
+        n = int(mask.sum())
+        if n:
+            voice[:n] = detection_voice(samples, self.localizer.geometry.positions,
+                                        np.array([d.direction for d in res.detections[:n]]))
         obs = {
             "srp_map": np.clip(np.asarray(res.srp_map, np.float32), -1.0, 1.0),
             "detections": det,
             "detection_mask": mask,
+            "detection_voice": voice,
             "odometry": self._body_delta(pose0, pose1, self.observation_space["odometry"]),
             "velocity": self._body_delta(pose0, pose_drive, self.observation_space["velocity"], 1.0 / cfg.control_s),
             "bumper": np.array([collided or bump_end], np.int8),
