@@ -3,6 +3,8 @@ streaming STFT / MPDR of ssl_core.beamform. Truth: plane waves of known directio
 reverberant room with real recordings (data/sounds test part) at known positions."""
 from __future__ import annotations
 
+import functools
+
 import numpy as np
 import pytest
 
@@ -11,7 +13,9 @@ from signals import plane_wave
 from sound_dataset import FS, ROOM_CASES, recordings, room_case
 from ssl_core.beamform import MpdrBeamformer, OverlapAdd, StftStream, beam_signal
 from ssl_core.geometry import cube8
-from ssl_core.tracking import Track
+from ssl_core.grid import angular_distance
+from ssl_core.localizer import Localizer, LocalizerConfig
+from ssl_core.tracking import TRACKING_MIN_SIGNIFICANCE, Track, Tracker
 
 POS = cube8().positions
 BLOCK = FS // 10
@@ -146,11 +150,10 @@ def _room_run(talker, machine, az_t, az_m, seconds=16):
 
 
 @pytest.mark.slow
-def test_talker_is_voice_and_louder_machine_is_not_in_a_reverberant_room():
+def test_given_tracks_at_the_true_directions_talker_is_voice_and_louder_machine_is_not():
     """RT60 0.6 s, machine 6 dB louder (active speech level vs machine RMS), 80-180 deg apart, 2 m.
-    Tracks are made by hand at the true directions, always active (pauses count against the talker):
-    with the SRP-PHAT localizer of this branch the talker is not detected at all beside a machine 6 dB
-    louder (nor at 0 dB), so the Tracker would give her no track (README)."""
+    The hearing alone: tracks are made by hand at the true directions, always active (pauses count
+    against the talker). The issue's requirement through the real chain is the test below."""
     voice_ok, machine_ok, report = [], [], []
     for case in ROOM_CASES:
         out, she_talks = _room_run(*case)
@@ -162,3 +165,74 @@ def test_talker_is_voice_and_louder_machine_is_not_in_a_reverberant_room():
     print("talker voice / machine non-voice share of 1 s windows:", report)
     assert np.mean(voice_ok) >= 0.9, report
     assert np.mean(machine_ok) >= 0.95, report
+
+
+# --- the same rooms through the real chain: Localizer -> Tracker -> Hearing -------------------------
+TRACK_GATE_DEG = 20.0   # the track nearest a source within this is "its" track
+
+
+@functools.lru_cache(maxsize=None)
+def _chain_run(case, sir_db, seconds=16):
+    """Per 1 s window (end of it): the evidence of every confirmed track; plus the true directions and
+    whether she talks. Localizer with noise suppression, two sources per window, the tracking gate."""
+    x, directions, she_talks = room_case(*case, seconds=seconds, sir_db=sir_db)
+    loc = Localizer("cube8", LocalizerConfig(noise_suppression=True, n_sources=2,
+                                             min_significance=TRACKING_MIN_SIGNIFICANCE))
+    tracker, hearing, tracks, out = Tracker(), Hearing(POS), [], []
+    for k in range(seconds * 10):
+        block = x[:, k * BLOCK:(k + 1) * BLOCK]
+        for r in loc.process(block):
+            tracks = tracker.update(r.detections, r.time)
+        ev = hearing.update(block, tracks, (k + 1) / 10)
+        if (k + 1) % 10 == 0:
+            out.append(ev)
+    return out, directions, she_talks
+
+
+def _nearest(evidence, direction, within_deg):
+    d = [float(np.rad2deg(angular_distance(e.direction, direction))) for e in evidence]
+    i = int(np.argmin(d)) if d else -1
+    return evidence[i] if d and d[i] <= within_deg else None
+
+
+def _chain_scores(sir_db):
+    """Per room case: (her talking windows with her track VOICE, windows with the machine's track
+    NON_VOICE, her talking windows with a VOICE track within 10 deg of her), windows after SETTLE_S."""
+    rows = []
+    for case in ROOM_CASES:
+        out, (u_her, u_machine), she_talks = _chain_run(case, sir_db)
+        scored = [(ev, t) for ev, t in zip(out, she_talks)][SETTLE_S:]
+        her = [_nearest(ev, u_her, TRACK_GATE_DEG) for ev, t in scored if t]
+        machine = [_nearest(ev, u_machine, TRACK_GATE_DEG) for ev, _ in scored]
+        near = [any(classify(e) is VoiceClass.VOICE and np.rad2deg(angular_distance(e.direction, u_her)) <= 10
+                    for e in ev) for ev, t in scored if t]
+        rows.append(([e is not None and classify(e) is VoiceClass.VOICE for e in her],
+                     [e is not None and classify(e) is VoiceClass.NON_VOICE for e in machine], near))
+    return rows
+
+
+# Measured (README, "Telling a victim from a machine"): through the real chain the talker gets no track
+# in most rooms: the SRP-PHAT map of the mixture (noise suppression on) has a peak within 10 deg of her in
+# 2-56 of 124 windows at -6 dB SIR even with four peaks and no gate, so neither the gate nor the tracker's
+# birth rule is what loses her; the machine's own beam then carries her leaked speech and the machine
+# is called VOICE in one room. Strict xfail: the day the chain meets the issue's figures, this fails.
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="talker not localized beside a machine 6 dB louder (README figures)")
+def test_real_chain_talker_is_voice_and_louder_machine_is_not_in_a_reverberant_room():
+    rows = _chain_scores(-6.0)
+    report = [(c[:2], round(float(np.mean(v)), 2), round(float(np.mean(m)), 2)) for c, (v, m, _) in zip(ROOM_CASES, rows)]
+    print("real chain, SIR -6 dB: her track VOICE / machine's track NON_VOICE share of 1 s windows:", report,
+          "pooled", round(float(np.mean(sum((v for v, _, _ in rows), []))), 2),
+          round(float(np.mean(sum((m for _, m, _ in rows), []))), 2))
+    assert np.mean(sum((v for v, _, _ in rows), [])) >= 0.9, report
+    assert np.mean(sum((m for _, m, _ in rows), [])) >= 0.95, report
+
+
+@pytest.mark.slow
+@pytest.mark.xfail(strict=True, reason="talker tracked in few windows beside an equal machine (README figures)")
+def test_real_chain_voice_track_within_10_deg_at_0_db_sir():
+    rows = _chain_scores(0.0)
+    report = [(c[:2], round(float(np.mean(n)), 2)) for c, (_, _, n) in zip(ROOM_CASES, rows)]
+    print("real chain, SIR 0 dB: a VOICE track within 10 deg of her, share of her 1 s windows:", report,
+          "pooled", round(float(np.mean(sum((n for _, _, n in rows), []))), 2))
+    assert np.mean(sum((n for _, _, n in rows), [])) >= 0.7, report
