@@ -126,13 +126,14 @@ def detection_voice(samples: np.ndarray, positions: np.ndarray, directions: np.n
     x = np.asarray(samples)
     x = x / 32768.0 if x.dtype == np.int16 else x.astype(float)
     hc = HearingConfig()
-    out = np.zeros(len(directions), np.float32)
-    for i, u in enumerate(np.asarray(directions, float).reshape(-1, 3)):
+    beams = []
+    for u in np.asarray(directions, float).reshape(-1, 3):
         beam = beam_signal(x, positions, u, FS)
         ms = max(float(np.mean(beam**2)), 1e-30)
-        gain_db = min(hc.vad_level_db - 10 * math.log10(ms / FULL_SCALE_SINE_MS), hc.max_gain_db)
-        out[i] = speech_fraction(_VADS[0].probabilities(beam * 10 ** (gain_db / 20), FS))
-    return out
+        beams.append(beam * 10 ** (min(hc.vad_level_db - 10 * math.log10(ms / FULL_SCALE_SINE_MS), hc.max_gain_db) / 20))
+    vad = _VADS[0]
+    probs = vad.process([vad.new_stream() for _ in beams], beams)   # all beams in one batch per frame
+    return np.array([speech_fraction(p) for p in probs], np.float32)
 
 
 def _localizer(cfg: LocalizerConfig) -> Localizer:
