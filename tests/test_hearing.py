@@ -135,10 +135,11 @@ def test_a_dropped_track_is_forgotten_and_config_errors_name_the_field():
 
 # --- reverberant room: a talker and a real machine 6 dB louder ------------------------------------
 SETTLE_S = 2  # windows before this are not scored: MPDR covariance and noise floors still filling
+_room = functools.lru_cache(maxsize=None)(room_case)   # each room simulated once per module
 
 
 def _room_run(talker, machine, az_t, az_m, seconds=16):
-    x, directions, she_talks = room_case(talker, machine, az_t, az_m, seconds)
+    x, directions, she_talks = _room(talker, machine, az_t, az_m, seconds)
     tracks = [_track(i, d, 1.0) for i, d in enumerate(directions)]
     h = Hearing(POS)
     out = []
@@ -175,7 +176,7 @@ TRACK_GATE_DEG = 20.0   # the track nearest a source within this is "its" track
 def _chain_run(case, sir_db, seconds=16):
     """Per 1 s window (end of it): the evidence of every confirmed track; plus the true directions and
     whether she talks. Localizer with noise suppression, two sources per window, the tracking gate."""
-    x, directions, she_talks = room_case(*case, seconds=seconds, sir_db=sir_db)
+    x, directions, she_talks = _room(*case, seconds, sir_db)
     loc = Localizer("cube8", LocalizerConfig(noise_suppression=True, n_sources=2,
                                              min_significance=TRACKING_MIN_SIGNIFICANCE))
     tracker, hearing, tracks, out = Tracker(), Hearing(POS), [], []
