@@ -9,7 +9,7 @@ beam (the bin weights of ``ssl_core.noise.NoiseFloor``) -> inverse STFT at 8 kHz
 
 Cost: the chain listens ``vad_on_s`` = 0.5 s in every ``vad_period_s`` = 1 s (all tracks at once;
 in between it only keeps the last samples and the evidence is held; the MPDR covariance, noise floors
-and gain follow listening time). Four sounding tracks cost
+and gain follow listening time). Four tracks cost
 6.0-6.4 ms of CPU per second of audio on one core (25-26 ms before: 16 kHz, every block); Silero alone is
 2.6-2.9 ms of it. Listening less (1 s in 2, 0.5 in 1.5, 0.4 in 1) or refreshing the MPDR less often
 lost windows in the room cases of tests/test_hearing.py (README, "Cost").
@@ -22,11 +22,16 @@ all windows where MPDR alone gives 64 %. Why the gain: Silero misses quiet speec
 speech frames in beams at -50 dB re full scale).
 
 The filter (log-odds L of "this source is a human voice", prior L = 0, i.e. P = 0.5):
-  * each 32 ms VAD frame of a SOUNDING track (activity >= ``min_activity``) adds ``rise_per_s``
-    x 0.032 if the frame is speech (VAD probability >= 0.5), and subtracts ``fall_per_s`` x 0.032 if not;
+  * each 32 ms VAD frame of a track adds ``rise_per_s`` x 0.032 if the frame is speech (VAD probability
+    >= 0.5); each non-speech frame of a SOUNDING track (activity >= ``min_activity``) subtracts
+    ``fall_per_s`` x 0.032;
     speech heard in several beams in the same block counts only for the beam with the largest share
     of its power above its noise floor (the talker's own; a talker leaking into a machine's beam);
-  * a track that is not sounding (a pause) leaves L unchanged: a victim who pauses stays a victim;
+  * a track that is not sounding (a pause) loses nothing: a victim who pauses stays a victim. Its beam
+    is still heard: a talker beside a louder machine is detected in few windows, so her track's
+    activity is often below 0.5 while she talks; when only sounding tracks were heard, her speech went
+    to the machine's beam (real-chain room cases of tests/test_hearing.py at -6 dB SIR: her track VOICE
+    in 16 % of her talking seconds, the machine NON_VOICE in 74 %; hearing every track: 33 % / 81 %);
   * L is clipped to +-``max_log_odds`` so that either class can be overturned within seconds.
 Why asymmetric: a caller talks in bursts (a call of ~1 s, then silence with the track still
 active), so speech frames are rare but decisive, while a machine yields speech frames in 0 % of
@@ -67,7 +72,7 @@ class HearingConfig:
     rise_per_s: float = 12.0       # log-odds per second of speech frames (0.38 per 32 ms frame)
     fall_per_s: float = 1.5        # log-odds lost per second of non-speech frames while sounding
     max_log_odds: float = 6.0      # |L| cap: P in [0.0025, 0.9975]
-    min_activity: float = 0.5      # tracks below this activity are pausing: their beam is not classified
+    min_activity: float = 0.5      # tracks below this activity are pausing: their silence lowers nothing
     vad_level_db: float = -20.0    # automatic gain: the denoised beam is scaled toward this slow level
     max_gain_db: float = 60.0      # for the VAD
     level_tau_s: float = 2.0       # time constant of that slow level
@@ -177,17 +182,15 @@ class Hearing:
         if beams.shape[1]:
             levels = 10 * np.log10(np.maximum(StftStream.mean_square(beams), 1e-30) / FULL_SCALE_SINE_MS)
             self._level.update(zip(ids, levels.tolist()))
-        sounding = [i for i, t in enumerate(tracks) if t.activity >= cfg.min_activity]
-        if not sounding or not beams.shape[1]:
+        if not tracks or not beams.shape[1]:
             return self._evidence(tracks, ids, time)
         memory = max(1, int(round(cfg.noise_memory_s / max(dt, StftStream.HOP / SAMPLE_RATE))))
         states = []
-        for i in sounding:
-            if ids[i] not in self._state:
-                self._state[ids[i]] = _TrackState(self.vad.new_stream(), NoiseFloor(memory),
-                                                  OverlapAdd(self._decimation))
-            states.append(self._state[ids[i]])
-        spec = beams[sounding]
+        for i in ids:
+            if i not in self._state:
+                self._state[i] = _TrackState(self.vad.new_stream(), NoiseFloor(memory), OverlapAdd(self._decimation))
+            states.append(self._state[i])
+        spec = beams
         power = spec.real**2 + spec.imag**2
         floors = np.stack([st.noise.update(p) for st, p in zip(states, power)])   # (k, bins)
         weights = states[0].noise.gains(power, floors[:, None])
@@ -210,9 +213,10 @@ class Hearing:
         # each frame heard stands for the frames not heard beside it
         scale = self.vad.frame_s / self._heard_share(x.shape[-1])
         step_up, step_down = cfg.rise_per_s * scale, cfg.fall_per_s * scale
-        for j, (st, p) in enumerate(zip(states, probs)):
+        for j, (st, p, t) in enumerate(zip(states, probs, tracks)):
             up = n_speech[j] * step_up if j == owner else 0.0
-            down = (len(p) - n_speech[j]) * step_down
+            # a pausing track's beam is heard (it may own speech) but its silence is no evidence
+            down = (len(p) - n_speech[j]) * step_down if t.activity >= cfg.min_activity else 0.0
             st.log_odds = min(max(st.log_odds + up - down, -cfg.max_log_odds), cfg.max_log_odds)
         return self._evidence(tracks, ids, time)
 
@@ -229,7 +233,7 @@ class Hearing:
                               self._level.get(i, -math.inf), float(t.activity)) for i, t in zip(ids, tracks)]
 
     def voice_probability(self, track_id: int) -> float:
-        """Accumulated P(voice) of a track (0.5 for a track never heard sounding)."""
+        """Accumulated P(voice) of a track (0.5 for a track never heard)."""
         st = self._state.get(track_id)
         return 1.0 / (1.0 + math.exp(-st.log_odds)) if st is not None else 0.5
 
