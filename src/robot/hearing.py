@@ -190,15 +190,14 @@ class Hearing:
             if i not in self._state:
                 self._state[i] = _TrackState(self.vad.new_stream(), NoiseFloor(memory), OverlapAdd(self._decimation))
             states.append(self._state[i])
-        spec = beams
-        power = spec.real**2 + spec.imag**2
+        power = beams.real**2 + beams.imag**2
         floors = np.stack([st.noise.update(p) for st, p in zip(states, power)])   # (k, bins)
         weights = states[0].noise.gains(power, floors[:, None])
         # share of each beam's power above its noise floor (an SNR: the talker's own beam, whose MPDR
         # cancels the machine, has more of it than the machine's beam she leaks into)
         excess = (power * weights).sum(axis=(1, 2)) / np.maximum(power.sum(axis=(1, 2)), 1e-30)
         clean = OverlapAdd.synthesise_all([st.synthesis for st in states],
-                                          spec * np.maximum(weights, cfg.noise_min_gain))
+                                          beams * np.maximum(weights, cfg.noise_min_gain))
         follow = 1 - math.exp(-dt / cfg.level_tau_s)
         for st, lvl, row in zip(states, level_db(clean, axis=-1).tolist(), clean):
             st.slow_db = lvl if st.slow_db is None else st.slow_db + (lvl - st.slow_db) * follow

@@ -58,8 +58,8 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from robot.kinematics import forward_kinematics, integrate_pose, twist_to_wheels
 from robot.hearing import HearingConfig
+from robot.kinematics import forward_kinematics, integrate_pose, twist_to_wheels
 from robot.odometry import Odometry, wrap_angle
 from robot.vad import SileroVad, speech_fraction
 from ssl_core.beamform import FULL_SCALE_SINE_MS, beam_signal
