@@ -99,8 +99,8 @@ class SimRobot:
         self._floor = m.geom(FLOOR_GEOM).id
         self._bumper = m.geom(rm.BUMPER_GEOM).id
         # Static geoms the bumper can meet: everything of the world's but the floor and small debris.
-        self._bumper_targets = [g for g in range(m.ngeom) if m.geom_bodyid[g] not in self._robot_bodies
-                                and g != self._floor and m.geom_contype[g] & rm.WORLD_CONTYPE]
+        self._bumper_targets = np.array([g for g in range(m.ngeom) if m.geom_bodyid[g] not in self._robot_bodies
+                                         and g != self._floor and m.geom_contype[g] & rm.WORLD_CONTYPE], int)
         self._sensor = {m.sensor(i).name: slice(m.sensor_adr[i], m.sensor_adr[i] + m.sensor_dim[i])
                         for i in range(m.nsensor)}
         self._stale = False
@@ -269,15 +269,12 @@ class SimRobot:
         if self.sensor("bumper")[0] > self.bumper_threshold:
             return True
         m, d = self.model, self.data
-        centre = d.geom_xpos[self._bumper]
-        reach = m.geom_rbound[self._bumper] + rm.BUMPER_TRAVEL
-        for g in self._bumper_targets:
-            if m.geom_type[g] != mujoco.mjtGeom.mjGEOM_PLANE and \
-                    np.linalg.norm(d.geom_xpos[g] - centre) > reach + m.geom_rbound[g]:
-                continue  # bounding spheres apart
-            if mujoco.mj_geomDistance(m, d, self._bumper, g, rm.BUMPER_TRAVEL, None) < rm.BUMPER_TRAVEL:
-                return True
-        return False
+        g = self._bumper_targets
+        reach = m.geom_rbound[self._bumper] + rm.BUMPER_TRAVEL + m.geom_rbound[g]
+        gap = np.linalg.norm(d.geom_xpos[g] - d.geom_xpos[self._bumper], axis=1)
+        near = g[(gap <= reach) | (m.geom_type[g] == mujoco.mjtGeom.mjGEOM_PLANE)]  # bounding spheres overlap
+        return any(mujoco.mj_geomDistance(m, d, self._bumper, int(k), rm.BUMPER_TRAVEL, None) < rm.BUMPER_TRAVEL
+                   for k in near)
 
     def contacts(self) -> list[Contact]:
         """Current contacts between the robot and anything but the floor."""
