@@ -107,29 +107,42 @@ def fibonacci_sphere(n: int, rng: np.random.Generator | None = None) -> np.ndarr
     return u
 
 
+#: Inter-microphone distances are rounded to this (m) before they shape anything: poses of one rigid array
+#: (distances equal to ~1e-15 m) share one geometry key, and a result depends only on the current array,
+#: never on which array was seen first (an earlier 2 mm tolerance reused whatever geometry came first).
+GEOMETRY_QUANTUM_M = 1e-6
+
+
+def array_distances(mics: np.ndarray) -> np.ndarray:
+    """Inter-microphone distances (M, M) in m, rounded to :data:`GEOMETRY_QUANTUM_M` (a geometry key)."""
+    mics = np.asarray(mics, float)
+    d = np.linalg.norm(mics[:, None, :] - mics[None, :, :], axis=-1)
+    return np.round(d / GEOMETRY_QUANTUM_M) * GEOMETRY_QUANTUM_M
+
+
 def diffuse_mixing(freqs_hz: np.ndarray, mics: np.ndarray, c: float = 343.0) -> np.ndarray:
     """Mixing matrices ``C(f) = Gamma(f)^(1/2)`` (F, M, M) of the spherically isotropic (diffuse)
     coherence ``Gamma_ij = sin(k d_ij) / (k d_ij)``: ``C(f) z(f)`` turns independent unit-variance
     spectra ``z`` into spectra with diffuse-field coherence (Habets & Gannot 2007). The symmetric
     square root varies smoothly with frequency, so the mixing filters are short (~ aperture / c).
-    Depends only on inter-microphone distances: the same for every pose of a rigid array."""
-    mics = np.asarray(mics, float)
+    Depends only on inter-microphone distances (:func:`array_distances`): the same for every pose of a
+    rigid array. Cached on the exact (rounded) geometry and frequencies."""
     freqs = np.asarray(freqs_hz, float)
-    d = np.linalg.norm(mics[:, None, :] - mics[None, :, :], axis=-1)
-    for f_k, d_k, c_k, mix in _MIXING_CACHE:
-        if c_k == c and f_k.shape == freqs.shape and d_k.shape == d.shape and np.array_equal(f_k, freqs) \
-                and np.allclose(d_k, d, atol=2e-3):
-            return mix
-    gamma = np.sinc(2.0 * freqs[:, None, None] * d[None] / c)
-    w, v = np.linalg.eigh(gamma)
-    mix = (v * np.sqrt(np.clip(w, 0.0, None))[:, None, :]) @ np.swapaxes(v, 1, 2)
-    _MIXING_CACHE.append((freqs, d, c, mix))
-    del _MIXING_CACHE[:-4]
+    d = array_distances(mics)
+    key = (freqs.size, float(freqs[-1]) if freqs.size else 0.0, freqs.tobytes(), d.tobytes(), float(c))
+    mix = _MIXING_CACHE.get(key)
+    if mix is None:
+        gamma = np.sinc(2.0 * freqs[:, None, None] * d[None] / c)
+        w, v = np.linalg.eigh(gamma)
+        mix = (v * np.sqrt(np.clip(w, 0.0, None))[:, None, :]) @ np.swapaxes(v, 1, 2)
+        _MIXING_CACHE[key] = mix
+        while len(_MIXING_CACHE) > 4:
+            _MIXING_CACHE.pop(next(iter(_MIXING_CACHE)))
     return mix
 
 
-# (freqs, distances, c, mixing): the array geometry and block sizes rarely change.
-_MIXING_CACHE: list[tuple[np.ndarray, np.ndarray, float, np.ndarray]] = []
+# (frequencies, rounded distances, c) -> mixing: the array geometry and block sizes rarely change.
+_MIXING_CACHE: dict[tuple, np.ndarray] = {}
 
 
 class DiffuseTail:

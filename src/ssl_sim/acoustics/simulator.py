@@ -30,7 +30,7 @@ from .diffraction import BoxSet, diffracted_arrivals, room_images
 from .materials import eyring_absorption_for_rt60, uniform_material
 from .noise import AmbientNoise, DiffuseNoiseField
 from .pose import ArrayMount, RobotPose
-from .rir import FRAC_HALF_TAPS, DiffuseTail, early_rir, tail_gain
+from .rir import FRAC_HALF_TAPS, DiffuseTail, array_distances, early_rir, tail_gain
 from .scene import AcousticScene, ImageSet
 from .sensor import Sensor, SensorConfig
 from .sources import PAPER_LEVEL_DB_SPL, SoundSource, victim_source
@@ -161,7 +161,7 @@ class AcousticSimulator:
         self._sensors: dict[int, Sensor] = {}
         self._images: OrderedDict[tuple, ImageSet] = OrderedDict()
         self._first_missing: dict[tuple, float] = {}
-        self._tails: dict[int, list[tuple[np.ndarray, DiffuseTail]]] = {}
+        self._tails: dict[tuple[int, bytes], DiffuseTail] = {}
         self._rirs: OrderedDict[bytes, _PoseRirs] = OrderedDict()
         self._sources: list[SoundSource] = []
         if sources is None:
@@ -238,17 +238,20 @@ class AcousticSimulator:
         return diffracted_arrivals(src, centre, self._boxes, self.scene.size, self._wall_reflection, present)
 
     def _tail(self, k: int, mics: np.ndarray) -> DiffuseTail:
-        # Rigid array: one tail per source serves every pose (matched on inter-mic distances within 2 mm).
-        d = np.linalg.norm(mics[:, None] - mics[None], axis=-1)
-        for dk, t in self._tails.get(k, []):
-            if dk.shape == d.shape and np.allclose(dk, d, atol=2e-3):
-                return t
+        # Rigid array: one tail per source serves every pose (keyed on the inter-mic distances rounded to 1 um;
+        # ``mics`` unquantised, so every pose of a rigid array gives the same key, whatever came before).
+        key = (k, array_distances(mics).tobytes())
+        t = self._tails.get(key)
+        if t is not None:
+            return t
         cfg = self.config
         rng = np.random.default_rng([cfg.seed & 0xFFFFFFFF, 0x7A11, k])
         t = DiffuseTail(self.rt60_bands, self.scene.volume, cfg.fs, cfg.c, self._tail_draw_length, rng, mics)
         L = self.rir_length - self.N_PRE
         t.tail, t.expected_energy, t.length = t.tail[:, :L], t.expected_energy[:L], L
-        self._tails.setdefault(k, []).append((d, t))
+        self._tails[key] = t
+        if len(self._tails) > 4 * max(1, len(self._sources)):
+            self._tails.pop(next(iter(self._tails)))
         return t
 
     def impulse_responses(self, mic_positions_world) -> np.ndarray:
@@ -258,7 +261,7 @@ class AcousticSimulator:
 
     def _pose_rirs(self, mics: np.ndarray) -> _PoseRirs:
         cfg = self.config
-        mics = self._quantise(mics, cfg.position_quantum_m)
+        raw, mics = mics, self._quantise(mics, cfg.position_quantum_m)
         key = mics.tobytes()
         hit = self._rirs.get(key)
         if hit is not None:
@@ -278,7 +281,7 @@ class AcousticSimulator:
                 l_early = min(L, n_pre + int(np.ceil(d_max / cfg.c * cfg.fs)) + FRAC_HALF_TAPS + 2 * n_pre)
                 out[k, :, :l_early] = early_rir(positions, reflection, mics, cfg.fs, cfg.c, n_pre, l_early)
             if cfg.late_reverb and self.rt60_bands.max() > 0:
-                tail = self._tail(k, mics)
+                tail = self._tail(k, raw)
                 start = int(round(first_missing / cfg.c * cfg.fs)) if np.isfinite(first_missing) else L
                 g = tail_gain(out[k, :, n_pre:], tail.expected_energy, start, cfg.fs)
                 out[k, :, n_pre:] += g * tail.tail
