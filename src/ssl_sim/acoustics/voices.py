@@ -158,13 +158,31 @@ def _butter_design(order: int, band: float | tuple[float, float], btype: str, fs
 
 
 def _smooth(x: np.ndarray, n: int) -> np.ndarray:
-    """Hann-window moving average over ``n`` samples along the last axis (same length; rows of a 2-D ``x``
-    are smoothed independently, in one FFT convolution)."""
+    """Hann-window moving average over ``n`` samples along the last axis (same length, zeros outside, as
+    ``np.convolve(x, k, "same")``); rows of a 2-D ``x`` are smoothed independently. A piecewise-constant
+    signal (phone tracks: a few dozen steps) is the sum of its steps' smoothed edges - the kernel's running
+    sum placed at each step - which costs a few kernel lengths instead of a full-length FFT convolution."""
     if n <= 1:
         return x
     k = np.hanning(n + 2)[1:-1]
     k /= k.sum()
-    return sps.fftconvolve(x, k[None] if np.ndim(x) == 2 else k, mode="same", axes=-1)
+    x = np.asarray(x, float)
+    if x.ndim == 2:
+        return np.stack([_smooth(row, n) for row in x]) if len(x) else x
+    jumps = np.diff(x, prepend=0.0, append=0.0)  # step j (0..N) from x[j-1] to x[j], zeros outside
+    steps = np.flatnonzero(jumps)
+    if steps.size * n > 4 * x.size:  # not piecewise constant (noise): FFT convolution
+        return sps.fftconvolve(x, k, mode="same")
+    N, off = x.size, (n - 1) // 2  # "same" keeps full-convolution samples off .. off + N - 1
+    kc = np.cumsum(k)
+    sh = n - 1 - off
+    out = np.zeros(N)
+    out[sh:] = x[: N - sh]  # every step's settled part: x delayed by the kernel length minus the centring
+    for j in steps:  # its transition: the kernel's running sum, over the n - 1 samples before it settles
+        t0, t1 = max(0, j - off), min(N, j - off + n - 1)
+        if t0 < t1:
+            out[t0:t1] += jumps[j] * kc[t0 + off - j: t1 + off - j]
+    return out
 
 
 def _bandnoise(rng: np.random.Generator, n: int, band: tuple[float, float], fs: int) -> np.ndarray:
