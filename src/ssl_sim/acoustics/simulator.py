@@ -54,7 +54,10 @@ class AcousticConfig:
     rounded to this before simulating (cache key). ``victim_*``: defaults for ``world.victims``.
     ``diffraction``: add the paths bent over/around an obstacle that blocks the direct sound or a
     first-order wall reflection (ISO 9613-2 barrier attenuation, see :mod:`.diffraction`).
-    ``noise_loop_s``: if set, the ambient field and the sensor self-noise repeat with this period (rounded
+    ``obstacle_order``: if set (< ``ism_order``), reflections off obstacle faces are modelled up to this order
+    only; the orders above it keep the paths between the room walls (checked for occlusion by the boxes) and
+    leave the rest to the diffuse tail (``AcousticScene.image_sources``; the search's cost falls from
+    ``n_surfaces ** ism_order`` to ``n_surfaces ** obstacle_order``). ``noise_loop_s``: if set, the ambient field and the sensor self-noise repeat with this period (rounded
     up to 8192-sample frames, at most 16 s): computed once, then cached - the env's fast fidelity.
     """
 
@@ -74,6 +77,7 @@ class AcousticConfig:
     rir_cache_size: int = 32
     diffraction: bool = True
     noise_loop_s: float | None = None
+    obstacle_order: int | None = None
     victim_sound: str = "calls"
     victim_level_db_spl: float = PAPER_LEVEL_DB_SPL
 
@@ -88,6 +92,9 @@ class AcousticConfig:
             raise ValueError(f"AcousticConfig.rt60_s: expected None or a time >= 0 s, got {self.rt60_s}")
         if self.noise_loop_s is not None and not 0 < self.noise_loop_s <= 16.384:
             raise ValueError(f"AcousticConfig.noise_loop_s: expected None or 0 < s <= 16.384, got {self.noise_loop_s}")
+        if self.obstacle_order is not None and not 0 <= self.obstacle_order <= self.ism_order:
+            raise ValueError(f"AcousticConfig.obstacle_order: expected None or 0..ism_order ({self.ism_order}), "
+                             f"got {self.obstacle_order}")
         if self.position_quantum_m <= 0 or self.visibility_grid_m <= 0:
             raise ValueError("AcousticConfig.position_quantum_m and visibility_grid_m must be > 0 m")
 
@@ -136,7 +143,13 @@ class AcousticSimulator:
             alpha = eyring_absorption_for_rt60(cfg.rt60_s, scene.volume, float(areas.sum()), cfg.c)
             scene = AcousticScene(world, cfg.min_obstacle_extent_m, material_override=uniform_material(alpha))
         self.scene = scene
-        self.ism_order = scene.max_order_for_budget(cfg.ism_order, cfg.ism_budget)
+        if cfg.obstacle_order is not None and cfg.obstacle_order < cfg.ism_order:
+            # The general search runs to obstacle_order only (the budget applies to it); walls go to ism_order.
+            self.ism_order = cfg.ism_order
+            self.obstacle_order = scene.max_order_for_budget(cfg.obstacle_order, cfg.ism_budget)
+        else:
+            self.ism_order = scene.max_order_for_budget(cfg.ism_order, cfg.ism_budget)
+            self.obstacle_order = None
         if self.ism_order < cfg.ism_order:
             warnings.warn(
                 f"image-source order reduced from {cfg.ism_order} to {self.ism_order}: {len(scene.surfaces)} surfaces "
@@ -212,7 +225,7 @@ class AcousticSimulator:
             self._images.move_to_end(key)
         else:
             ref = self.scene.size / 2 if recv is None else recv
-            imgs = self.scene.image_sources(src, ref, self.ism_order, cfg.c)
+            imgs = self.scene.image_sources(src, ref, self.ism_order, cfg.c, obstacle_order=self.obstacle_order)
             self._images[key] = imgs
             if len(self._images) > 512:
                 self._images.popitem(last=False)
