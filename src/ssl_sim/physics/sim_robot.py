@@ -21,6 +21,7 @@ from ssl_sim.world import World
 _FATAL_WARNINGS = (mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL,
                    mujoco.mjtWarning.mjWARN_CNSTRFULL, mujoco.mjtWarning.mjWARN_CONTACTFULL,
                    mujoco.mjtWarning.mjWARN_INERTIA)
+_FATAL_INDEX = np.array([int(w) for w in _FATAL_WARNINGS])
 
 
 class PhysicsError(RuntimeError):
@@ -194,12 +195,12 @@ class SimRobot:
         n = int(round((self._requested - self.time) / self.timestep))
         if n <= 0:
             return
-        before = self.warning_counts()
+        before = self.data.warning.number[_FATAL_INDEX]
         mujoco.mj_step(self.model, self.data, nstep=n)
         # mj_step leaves positions, sensors and contacts one step behind the state; refresh on first read.
         self._stale = True
-        after = self.warning_counts()
-        grew = {k: after[k] - before[k] for k in after if after[k] > before[k]}
+        after = self.data.warning.number[_FATAL_INDEX]
+        grew = {w.name: int(a - b) for w, a, b in zip(_FATAL_WARNINGS, after, before) if a > b}
         if grew or not np.all(np.isfinite(self.data.qpos)):
             raise PhysicsError(f"physics unstable at t={self.time:.3f} s: warnings {grew or 'none'}, "
                                f"finite state {bool(np.all(np.isfinite(self.data.qpos)))}")
