@@ -243,6 +243,16 @@ def diffracted_arrivals(source, receiver, boxes: BoxSet, room_size, wall_reflect
     r = np.asarray(receiver, float)
     size = np.asarray(room_size, float)
     imgs, refl, walls = room_images(source, size, wall_reflection)
+    s_real = np.asarray(source, float)
+    # Reflection points on the six walls, and whether the legs source -> wall and wall -> receiver are blocked
+    # (one vectorised test for all walls).
+    ax6, plane6 = walls[1:] // 2, np.where(walls[1:] % 2, size[walls[1:] // 2], 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t6 = (plane6 - imgs[1:][np.arange(6), ax6]) / (r[ax6] - imgs[1:][np.arange(6), ax6])
+    p6 = imgs[1:] + t6[:, None] * (r - imgs[1:])
+    hit = boxes.segments_hit(np.vstack([np.broadcast_to(s_real, (6, 3)), p6]),
+                             np.vstack([p6, np.broadcast_to(r, (6, 3))])).any(axis=1)
+    first6, last6 = hit[:6], hit[6:]
     pos_out, fac_out = [], []
     for img, rf, w, here in zip(imgs, refl, walls, present):
         if here:
@@ -252,13 +262,10 @@ def diffracted_arrivals(source, receiver, boxes: BoxSet, room_size, wall_reflect
         else:
             ax = w // 2
             plane = size[ax] if w % 2 else 0.0
-            t = (plane - img[ax]) / (r[ax] - img[ax])
-            p = img + t * (r - img)  # reflection point on the wall
+            p = p6[w]  # reflection point on the wall
             if not np.all((p >= -1e-6) & (p <= size + 1e-6)):
                 continue
-            s_real = np.asarray(source, float)
-            first_blocked = boxes.segments_hit(s_real[None], p[None])[0].any()
-            last_blocked = boxes.segments_hit(p[None], r[None])[0].any()
+            first_blocked, last_blocked = first6[w], last6[w]
             if first_blocked and last_blocked:
                 continue
             r_mirror = r.copy()
