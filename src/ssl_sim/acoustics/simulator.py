@@ -251,7 +251,7 @@ class AcousticSimulator:
         return diffracted_arrivals(src, centre, self._boxes, self.scene.size, self._wall_reflection, present)
 
     def _tail(self, k: int, mics: np.ndarray) -> DiffuseTail:
-        # Rigid array: one tail per source serves every pose (keyed on the inter-mic distances rounded to 1 mm
+        # Rigid array: one tail per source serves every pose (keyed on the inter-mic distances rounded to 1 um
         # from the unquantised ``mics``: every pose of a rigid array gives the same key, whatever came before).
         key = (k, array_distances(mics).tobytes())
         t = self._tails.get(key)
