@@ -57,8 +57,9 @@ class AcousticConfig:
     ``obstacle_order``: if set (< ``ism_order``), reflections off obstacle faces are modelled up to this order
     only; the orders above it keep the paths between the room walls (checked for occlusion by the boxes) and
     leave the rest to the diffuse tail (``AcousticScene.image_sources``; the search's cost falls from
-    ``n_surfaces ** ism_order`` to ``n_surfaces ** obstacle_order``). ``noise_loop_s``: if set, the ambient field and the sensor self-noise repeat with this period (rounded
-    up to 8192-sample frames, at most 16 s): computed once, then cached - the env's fast fidelity.
+    ``n_surfaces ** ism_order`` to ``n_surfaces ** obstacle_order``). ``noise_loop_s``: if set, the ambient
+    field and the sensor self-noise repeat with this period (rounded up to 8192-sample frames, at most 16 s):
+    computed once, then cached - the env's fast fidelity.
     """
 
     fs: int = 16000
