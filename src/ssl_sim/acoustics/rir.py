@@ -57,12 +57,21 @@ def _band_weights_fft(n_fft: int, fs: int) -> np.ndarray:
 
 def _frac_kernel(delay: np.ndarray, half: int = FRAC_HALF_TAPS) -> tuple[np.ndarray, np.ndarray]:
     """Hann-windowed sinc taps for fractional delays: integer positions (..., 2*half) and weights."""
-    base = np.floor(delay).astype(np.int64)
+    fl = np.floor(delay)
+    base = fl.astype(np.int64)
     offs = np.arange(-half + 1, half + 1)
     pos = base[..., None] + offs
-    x = pos - delay[..., None]
-    w = np.sinc(x) * (0.5 + 0.5 * np.cos(np.pi * np.clip(x / half, -1, 1)))
-    return pos, w
+    # x = offs - frac with frac in [0, 1), so |x| <= half. One sine and one cosine pair per delay instead of
+    # per tap: sin(pi (o - f)) = (-1)^(o+1) sin(pi f), cos(pi (o - f) / half) by the angle-difference formula.
+    frac = (delay - fl)[..., None]
+    x = offs - frac
+    sign = np.where(offs % 2, 1.0, -1.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # sin(pi f) from the nearer integer: accurate when f is within rounding of 1 as well as of 0.
+        sinc = np.where(x == 0, 1.0, sign * np.sin(np.pi * np.minimum(frac, 1.0 - frac)) / (np.pi * x))
+    a, b = np.pi * offs / half, np.pi * frac / half
+    hann = 0.5 + 0.5 * (np.cos(a) * np.cos(b) + np.sin(a) * np.sin(b))
+    return pos, sinc * hann
 
 
 def early_rir(image_positions: np.ndarray, reflection: np.ndarray, mics: np.ndarray, fs: int, c: float,
