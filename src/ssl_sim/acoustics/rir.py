@@ -189,10 +189,13 @@ class DiffuseTail:
 def _smooth_energy(e: np.ndarray, n: int) -> np.ndarray:
     """Centred moving average over ``n`` samples (same length)."""
     n = max(1, int(n))
+    size, h = e.size, n // 2
     c = np.concatenate([[0.0], np.cumsum(e)])
-    lo = np.clip(np.arange(e.size) - n // 2, 0, e.size)
-    hi = np.clip(np.arange(e.size) - n // 2 + n, 0, e.size)
-    return (c[hi] - c[lo]) / n
+    # c[clip(i - h, 0, size)] and c[clip(i - h + n, 0, size)] for i = 0 .. size - 1, as slices.
+    lo = np.concatenate([np.full(min(h, size), c[0]), c[: max(0, size - h)]])
+    k = min(size + 1, n - h)  # first index of the upper bound
+    hi = np.concatenate([c[k: k + size], np.full(max(0, size - (size + 1 - k)), c[size])])
+    return (hi - lo) / n
 
 
 def tail_gain(early: np.ndarray, expected_energy: np.ndarray, start: int, fs: int, smooth_s: float = 0.02) -> np.ndarray:
