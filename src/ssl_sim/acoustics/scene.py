@@ -322,14 +322,19 @@ class AcousticScene:
         paths between the room walls (:meth:`wall_images`): reflections off obstacle faces beyond that order
         are left to the diffuse tail. The search's cost grows like ``n_surfaces ** order``; this keeps it at
         ``n_surfaces ** obstacle_order`` plus a few dozen occlusion tests."""
-        from pyroomacoustics import libroom
-
         if obstacle_order is not None and obstacle_order < order and not self.is_shoebox and not force_general:
             low = self.image_sources(source, receiver, obstacle_order, c)
             high = self.wall_images(source, receiver, order, c, min_order=obstacle_order + 1)
             return ImageSet(np.vstack([low.positions, high.positions]), np.vstack([low.reflection, high.reflection]),
                             np.concatenate([low.order, high.order]))
-        if self.is_shoebox and not force_general:
+        return self._engine_images(source, receiver, order, c, shoebox=self.is_shoebox and not force_general)
+
+    def _engine_images(self, source, receiver, order: int, c: float, shoebox: bool) -> ImageSet:
+        """The visible images from pyroomacoustics' engine: the shoebox enumeration of the room walls alone
+        (``shoebox``: every image, no obstacles) or the general search over all surfaces."""
+        from pyroomacoustics import libroom
+
+        if shoebox:
             absorption = np.array([m.absorption for m in self.room_materials], np.float32).T  # (bands, 6)
             eng = libroom.Room(self.size.astype(np.float32), absorption, np.zeros_like(absorption), [], float(c),
                                int(order), 1e-7, 1.0, 0.5, 0.004, False)
@@ -352,22 +357,11 @@ class AcousticScene:
         """Images of ``source`` off the room walls only, of order ``min_order .. order``, whose paths to
         ``receiver`` (world, m) no obstacle box blocks: each image's straight line to the receiver, folded back
         into the room at the walls it crosses, is the real path; every leg is tested against the boxes."""
-        from pyroomacoustics import libroom
-
         from .diffraction import BoxSet
 
-        absorption = np.array([m.absorption for m in self.room_materials], np.float32).T  # (bands, 6)
-        eng = libroom.Room(self.size.astype(np.float32), absorption, np.zeros_like(absorption), [], float(c),
-                           int(order), 1e-7, 1.0, 0.5, 0.004, False)
-        eng.add_mic(np.asarray(receiver, np.float32).reshape(3, 1))
-        eng.image_source_model(np.asarray(source, np.float32))
-        pos = np.array(eng.sources, float).T.reshape(-1, 3)
-        att = np.array(eng.attenuations, float).T.reshape(pos.shape[0], -1)
-        if att.shape[1] == 1:
-            att = np.repeat(att, N_BANDS, axis=1)
-        orders = np.array(eng.orders, int)
-        keep = orders >= min_order
-        pos, att, orders = pos[keep], att[keep], orders[keep]
+        imgs = self._engine_images(source, receiver, order, c, shoebox=True)
+        keep = imgs.order >= min_order
+        pos, att, orders = imgs.positions[keep], imgs.reflection[keep], imgs.order[keep]
         if self._box_set is None:
             self._box_set = BoxSet.from_boxes([b for _, b in self.boxes])
         if pos.shape[0] == 0 or len(self._box_set) == 0:
