@@ -39,3 +39,26 @@ def test_rendering_does_not_depend_on_earlier_poses_or_arrays():
     assert np.array_equal(alone, fresh_after_others)
     # ...and the other array really sounds different (the test would not notice a reuse otherwise).
     assert not np.array_equal(alone, _sim().listen(BUILT.mic_positions_world(POSE), 0.2, t0=0.5))
+
+
+def test_averaged_poses_of_a_turning_array_are_made_rigid():
+    from ssl_core.geometry import cube8
+    from ssl_sim.backends import _rigid_fit
+
+    ref = np.asarray(cube8().positions) + [1.0, 2.0, 0.27]
+
+    def rz(a):
+        return np.array([[np.cos(a), -np.sin(a), 0], [np.sin(a), np.cos(a), 0], [0, 0, 1]])
+
+    centre = ref.mean(axis=0)
+    poses = [(ref - centre) @ rz(a).T + centre + [0.02 * a, 0.0, 0.0] for a in (0.0, 0.1, 0.2)]
+    means = 0.5 * (np.array(poses[:-1]) + np.array(poses[1:]))  # chunk midpoints as the audio source forms them
+    fitted = _rigid_fit(ref, means)
+
+    def dist(x):
+        return np.linalg.norm(x[:, None] - x[None], axis=-1)
+
+    assert np.abs(dist(means[1]) - dist(ref)).max() > 5e-5          # the plain average is shrunk
+    for f, m in zip(fitted, means):
+        assert np.abs(dist(f) - dist(ref)).max() < 1e-12            # the fit has the array's exact geometry
+        assert np.abs(f - m).max() < 3e-4                           # and stays where the average was
