@@ -76,7 +76,7 @@ class SimRobot:
 
     def __init__(self, world: World | None = None, config: rm.RobotModelConfig = rm.RobotModelConfig(),
                  timestep: float = rm.DEFAULT_TIMESTEP, start: tuple[float, float, float] | None = None,
-                 bumper_threshold: float = 1.0) -> None:
+                 bumper_threshold: float = 1.0, park_settled: bool = False) -> None:
         if not 0 < timestep <= config.contact_timeconst / 2:
             raise ValueError("timestep: expected 0 < timestep <= contact_timeconst / 2 = "
                              f"{config.contact_timeconst / 2} s "
@@ -94,6 +94,10 @@ class SimRobot:
         self._array = m.body(rm.ARRAY_BODY).id
         self._wheel_qpos = np.array([m.jnt_qposadr[m.joint(j).id] for j in rm.WHEEL_JOINTS])
         self._wheel_dof = np.array([m.jnt_dofadr[m.joint(j).id] for j in rm.WHEEL_JOINTS])
+        self._base_dof = int(m.jnt_dofadr[m.joint("base_free").id])
+        #: Skip the physics while the motors stand and the robot is at rest (``_settled``): time advances, the
+        #: state does not (the sub-millimetre creep of a parked robot on soft contacts is left out).
+        self.park_settled = bool(park_settled)
         self._mics = np.array([m.site(rm.mic_site(i)).id for i in range(config.array.n_mics)])
         self._motors = np.array([m.geom(f"motor{i}_body").id for i in range(3)])
         self._robot_bodies = self._subtree(self._base)
@@ -195,6 +199,9 @@ class SimRobot:
         n = int(round((self._requested - self.time) / self.timestep))
         if n <= 0:
             return
+        if self.park_settled and self._settled():
+            self.data.time += n * self.timestep  # parked: the state stays as it is (see __init__)
+            return
         before = self.data.warning.number[_FATAL_INDEX]
         mujoco.mj_step(self.model, self.data, nstep=n)
         # mj_step leaves positions, sensors and contacts one step behind the state; refresh on first read.
@@ -204,6 +211,16 @@ class SimRobot:
         if grew or not np.all(np.isfinite(self.data.qpos)):
             raise PhysicsError(f"physics unstable at t={self.time:.3f} s: warnings {grew or 'none'}, "
                                f"finite state {bool(np.all(np.isfinite(self.data.qpos)))}")
+
+    def _settled(self) -> bool:
+        """Motors commanded to stand and the robot (nearly) at rest: base under 2 mm/s and 0.01 rad/s, wheels
+        under 0.05 rad/s (a parked robot on soft contacts jitters at the 90th percentiles 1.1 mm/s, 0.004 rad/s
+        and 0.03 rad/s, measured in light_rubble_three)."""
+        if np.any(self.data.ctrl[:3]):
+            return False
+        v = self.data.qvel[self._base_dof: self._base_dof + 6]
+        return bool(np.linalg.norm(v[:3]) < 2e-3 and np.linalg.norm(v[3:]) < 1e-2
+                    and np.max(np.abs(self.data.qvel[self._wheel_dof])) < 5e-2)
 
     def warning_counts(self) -> dict[str, int]:
         """MuJoCo's cumulative counters of the warnings that invalidate a run."""
