@@ -145,7 +145,7 @@ def _rigid_fit(reference: np.ndarray, targets: np.ndarray) -> np.ndarray:
     """The rigid motion of ``reference`` (n_mics, 3) closest to each of ``targets`` (k, n_mics, 3) in least
     squares (Kabsch), applied to ``reference``: averaged poses of a turning array are slightly shrunk (the mean
     of two rotated points lies inside the arc), and the acoustics key the diffuse field on the exact
-    inter-microphone distances, so the averaged array is made rigid again (moved by ~0.01 mm)."""
+    inter-microphone distances, so the averaged array is made rigid again (moved by ~0.1 mm at 0.1 rad per chunk)."""
     ref_c = reference - reference.mean(axis=0)
     centres = targets.mean(axis=1, keepdims=True)
     h = np.einsum("mi,kmj->kij", ref_c, targets - centres)  # (k, 3, 3) cross-covariance
