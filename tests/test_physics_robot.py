@@ -245,3 +245,23 @@ def test_bad_input_and_instability_are_reported(robot):
     with pytest.raises(PhysicsError):
         robot.step(0.01)
     robot.reset()
+
+
+def test_parked_robot_skips_the_physics_until_commanded():
+    parked, stepped = SimRobot(park_settled=True), SimRobot()
+    for r in (parked, stepped):
+        r.step(1.0)  # settle on the wheels
+    p0 = parked.pose()
+    parked.step(2.0)
+    p1 = parked.pose()
+    assert parked.time == pytest.approx(3.0, abs=1e-9)      # time goes on
+    assert (p1.x, p1.y, p1.yaw) == (p0.x, p0.y, p0.yaw)    # the state does not
+    # Commanded again, it drives like the robot that was stepped all along (the same twist, the same 1 s).
+    moved = []
+    for r in (parked, stepped):
+        q = r.pose()
+        r.set_twist(0.2, 0.0, 0.0)
+        r.step(1.0)
+        moved.append(float(np.hypot(r.pose().x - q.x, r.pose().y - q.y)))
+    assert moved[0] == pytest.approx(moved[1], rel=0.01)
+    assert moved[0] > 0.15

@@ -10,6 +10,7 @@ Tajti et al. 2014) and its angular speed that divided by the wheel radius.
 from __future__ import annotations
 
 from dataclasses import dataclass, field
+from functools import lru_cache
 
 import numpy as np
 
@@ -38,9 +39,17 @@ class OmniDriveParams:
     @property
     def jacobian(self) -> np.ndarray:
         """Matrix J with ``wheel_speeds = J @ (vx, vy, omega)``, shape (3, 3), units 1/m and 1."""
-        th = np.asarray(self.wheel_angles, dtype=float)
-        rows = np.stack([-np.sin(th), np.cos(th), np.full(3, self.base_radius)], axis=1)
-        return rows / self.wheel_radius
+        return _matrices(self)[0].copy()
+
+
+@lru_cache(maxsize=8)
+def _matrices(params: OmniDriveParams) -> tuple[np.ndarray, np.ndarray]:
+    """(J, J^-1) of ``params``, read-only; cached because odometry converts every encoder reading."""
+    th = np.asarray(params.wheel_angles, dtype=float)
+    j = np.stack([-np.sin(th), np.cos(th), np.full(3, params.base_radius)], axis=1) / params.wheel_radius
+    j_inv = np.linalg.inv(j)
+    j.flags.writeable = j_inv.flags.writeable = False
+    return j, j_inv
 
 
 def inverse_kinematics(twist, params: OmniDriveParams = OmniDriveParams()) -> np.ndarray:
@@ -48,7 +57,7 @@ def inverse_kinematics(twist, params: OmniDriveParams = OmniDriveParams()) -> np
     t = np.asarray(twist, dtype=float)
     if t.shape[-1] != 3:
         raise ValueError(f"twist must end in 3 values (vx, vy, omega), got shape {t.shape}")
-    return t @ params.jacobian.T
+    return t @ _matrices(params)[0].T
 
 
 def forward_kinematics(wheel_speeds, params: OmniDriveParams = OmniDriveParams()) -> np.ndarray:
@@ -56,7 +65,7 @@ def forward_kinematics(wheel_speeds, params: OmniDriveParams = OmniDriveParams()
     w = np.asarray(wheel_speeds, dtype=float)
     if w.shape[-1] != 3:
         raise ValueError(f"wheel_speeds must end in 3 values, got shape {w.shape}")
-    return w @ np.linalg.inv(params.jacobian).T
+    return w @ _matrices(params)[1].T
 
 
 def saturate(wheel_speeds, max_speed: float) -> np.ndarray:

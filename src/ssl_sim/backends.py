@@ -115,12 +115,12 @@ class SimAudioSource(AudioSource):
                 ego = None
         moved = float(np.max(np.linalg.norm(traj - traj[0], axis=-1)))
         if moved <= self.still_tolerance_m:
-            used = traj.mean(axis=0, keepdims=True)
+            used = _rigid_fit(traj[0], traj.mean(axis=0, keepdims=True))
             x = self.acoustics.listen(used[0], n / fs, n0 / fs, extra_pressure=ego)
         else:
             self.moving_blocks += 1
-            # Each chunk at the pose in its middle (mean of its end poses).
-            used = 0.5 * (traj[:-1] + traj[1:])
+            # Each chunk at the pose in its middle (mean of its end poses, made rigid again).
+            used = _rigid_fit(traj[0], 0.5 * (traj[:-1] + traj[1:]))
             x = np.concatenate([self.acoustics.listen(used[i], (b - a) / fs, (n0 + a) / fs,
                                                       extra_pressure=None if ego is None else ego[:, a:b])
                                 for i, (a, b) in enumerate(zip(bounds[:-1], bounds[1:]))], axis=1)
@@ -139,6 +139,22 @@ class SimAudioSource(AudioSource):
 
     def flush(self) -> None:
         """Nothing is buffered: a simulated array renders from the current physics time on."""
+
+
+def _rigid_fit(reference: np.ndarray, targets: np.ndarray) -> np.ndarray:
+    """The rigid motion of ``reference`` (n_mics, 3) closest to each of ``targets`` (k, n_mics, 3) in least
+    squares (Kabsch), applied to ``reference``: averaged poses of a turning array are slightly shrunk (the mean
+    of two rotated points lies inside the arc), and the acoustics key the diffuse field on the exact
+    inter-microphone distances, so the averaged array is made rigid again (moved by ~0.1 mm at 0.1 rad per chunk)."""
+    ref_c = reference - reference.mean(axis=0)
+    centres = targets.mean(axis=1, keepdims=True)
+    h = np.einsum("mi,kmj->kij", ref_c, targets - centres)  # (k, 3, 3) cross-covariance
+    u, _, vt = np.linalg.svd(h)
+    d = np.sign(np.linalg.det(np.einsum("kji,klj->kil", vt, u)))  # det(V U^T): no reflections
+    fix = np.ones((targets.shape[0], 3))
+    fix[:, 2] = d
+    rot = np.einsum("kji,kj,klj->kil", vt, fix, u)  # V diag(1, 1, d) U^T
+    return np.einsum("kij,mj->kmi", rot, ref_c) + centres
 
 
 def array_frame_directions(robot_or_origin, rotation_or_points, points_world=None

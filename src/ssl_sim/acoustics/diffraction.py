@@ -27,6 +27,7 @@ use c = 343 m/s.
 from __future__ import annotations
 
 from dataclasses import dataclass
+from functools import cached_property
 
 import numpy as np
 
@@ -93,6 +94,16 @@ class BoxSet:
 
     def edges(self, k: int) -> tuple[np.ndarray, np.ndarray]:
         """The 12 edges of box ``k``: start points (12, 3) and end points (12, 3), world m."""
+        starts, ends = self._edges
+        return starts[k], ends[k]
+
+    @cached_property
+    def _edges(self) -> tuple[np.ndarray, np.ndarray]:
+        """Every box's edges, start and end points (n, 12, 3) each (computed once: each pose asks again)."""
+        pairs = [self._box_edges(k) for k in range(len(self))]
+        return np.array([p[0] for p in pairs]).reshape(-1, 12, 3), np.array([p[1] for p in pairs]).reshape(-1, 12, 3)
+
+    def _box_edges(self, k: int) -> tuple[np.ndarray, np.ndarray]:
         r, c, h = self.rotations[k], self.centers[k], self.halves[k]
         starts, ends = [], []
         for ax in range(3):
@@ -184,19 +195,21 @@ def diffracted_paths(source: np.ndarray, receiver: np.ndarray, boxes: BoxSet, ro
             length = float(np.linalg.norm(p - s) + np.linalg.norm(r - p))
             out.append(DiffractedPath(p[None], length, straight, 0.0,
                                       barrier_attenuation_db(length - straight, freqs_hz)))
-    for i, j in _FACE_PAIRS:
-        if not (open_edge[i] and open_edge[j]) or single_ok[i] or single_ok[j]:
-            continue
-        sep = float(np.linalg.norm(a_all[j] - a_all[i]))
-        first, second = np.array([i, j]), np.array([j, i])  # over the pair in either order
-        e1 = _points_on_edges(s, r, a_all[first], b_all[first], extra=sep)
+    pairs = np.array([(i, j) for i, j in _FACE_PAIRS
+                      if open_edge[i] and open_edge[j] and not single_ok[i] and not single_ok[j]], int).reshape(-1, 2)
+    if pairs.size:
+        m = pairs.shape[0]
+        # Every pair over its two edges in either order, all at once: rows 0..m-1 (i, j), m..2m-1 (j, i).
+        first, second = np.concatenate([pairs[:, 0], pairs[:, 1]]), np.concatenate([pairs[:, 1], pairs[:, 0]])
+        seps = np.linalg.norm(a_all[second] - a_all[first], axis=1)
+        e1 = _points_on_edges(s, r, a_all[first], b_all[first], extra=seps)
         e2 = _points_on_edges(e1, r, a_all[second], b_all[second])
-        ok = clear([e1, e2])
-        if ok.any():
-            q = int(np.flatnonzero(ok)[0])
+        ok = clear([e1, e2]).reshape(2, m)
+        for p in np.flatnonzero(ok.any(axis=0)):
+            q = p if ok[0, p] else p + m  # the (i, j) order first
             length = float(np.linalg.norm(e1[q] - s) + np.linalg.norm(e2[q] - e1[q]) + np.linalg.norm(r - e2[q]))
-            out.append(DiffractedPath(np.array([e1[q], e2[q]]), length, straight, sep,
-                                      barrier_attenuation_db(length - straight, freqs_hz, sep)))
+            out.append(DiffractedPath(np.array([e1[q], e2[q]]), length, straight, float(seps[q]),
+                                      barrier_attenuation_db(length - straight, freqs_hz, float(seps[q]))))
     return out
 
 
@@ -230,6 +243,16 @@ def diffracted_arrivals(source, receiver, boxes: BoxSet, room_size, wall_reflect
     r = np.asarray(receiver, float)
     size = np.asarray(room_size, float)
     imgs, refl, walls = room_images(source, size, wall_reflection)
+    s_real = np.asarray(source, float)
+    # Reflection points on the six walls, and whether the legs source -> wall and wall -> receiver are blocked
+    # (one vectorised test for all walls).
+    ax6, plane6 = walls[1:] // 2, np.where(walls[1:] % 2, size[walls[1:] // 2], 0.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        t6 = (plane6 - imgs[1:][np.arange(6), ax6]) / (r[ax6] - imgs[1:][np.arange(6), ax6])
+    p6 = imgs[1:] + t6[:, None] * (r - imgs[1:])
+    hit = boxes.segments_hit(np.vstack([np.broadcast_to(s_real, (6, 3)), p6]),
+                             np.vstack([p6, np.broadcast_to(r, (6, 3))])).any(axis=1)
+    first6, last6 = hit[:6], hit[6:]
     pos_out, fac_out = [], []
     for img, rf, w, here in zip(imgs, refl, walls, present):
         if here:
@@ -239,13 +262,10 @@ def diffracted_arrivals(source, receiver, boxes: BoxSet, room_size, wall_reflect
         else:
             ax = w // 2
             plane = size[ax] if w % 2 else 0.0
-            t = (plane - img[ax]) / (r[ax] - img[ax])
-            p = img + t * (r - img)  # reflection point on the wall
+            p = p6[w]  # reflection point on the wall
             if not np.all((p >= -1e-6) & (p <= size + 1e-6)):
                 continue
-            s_real = np.asarray(source, float)
-            first_blocked = boxes.segments_hit(s_real[None], p[None])[0].any()
-            last_blocked = boxes.segments_hit(p[None], r[None])[0].any()
+            first_blocked, last_blocked = first6[w], last6[w]
             if first_blocked and last_blocked:
                 continue
             r_mirror = r.copy()

@@ -112,6 +112,9 @@ class EgoNoise:
             w = np.concatenate([w, np.repeat(w[:, -1:], lookahead, axis=1)], axis=1)
         if self._next_n0 != n0:
             self._phase = self._phase0.copy()
+        if not np.any(w):  # motors standing: silent, the tone's phase stays (skips rendering the broadband part)
+            self._next_n0 = n0 + n
+            return np.zeros_like(w)
         f = cfg.mesh_hz(w) * self._spread                          # (3, n)
         phase = self._phase[:, None] + 2 * np.pi * np.cumsum(f, axis=1) / fs
         tone = np.zeros_like(f)

@@ -12,7 +12,7 @@ from dataclasses import dataclass
 import numpy as np
 from scipy import fft as sfft
 
-from .rir import diffuse_mixing
+from .rir import array_distances, diffuse_mixing
 from .signals import TimeKeyedNoise, _spectrum_fir
 
 P_REF = 20e-6  # Pa
@@ -96,8 +96,8 @@ class DiffuseNoiseField:
     def render(self, mics: np.ndarray, n0: int, n: int) -> np.ndarray:
         """Pressure (n_mics, n) Pa at microphones ``mics`` (n_mics, 3) world m, samples ``n0 ..``."""
         mics = np.asarray(mics, float)
-        d = np.linalg.norm(mics[:, None] - mics[None], axis=-1)
-        if self._geometry is None or self._geometry.shape != d.shape or not np.allclose(self._geometry, d, atol=2e-3):
+        d = array_distances(mics)  # exact key: the frames depend on this array only, not on earlier ones
+        if self._geometry is None or self._geometry.shape != d.shape or not np.array_equal(self._geometry, d):
             self._geometry, self._mix = d, None
             self._frames.clear()
         if n <= 0:

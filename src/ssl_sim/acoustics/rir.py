@@ -57,12 +57,21 @@ def _band_weights_fft(n_fft: int, fs: int) -> np.ndarray:
 
 def _frac_kernel(delay: np.ndarray, half: int = FRAC_HALF_TAPS) -> tuple[np.ndarray, np.ndarray]:
     """Hann-windowed sinc taps for fractional delays: integer positions (..., 2*half) and weights."""
-    base = np.floor(delay).astype(np.int64)
+    fl = np.floor(delay)
+    base = fl.astype(np.int64)
     offs = np.arange(-half + 1, half + 1)
     pos = base[..., None] + offs
-    x = pos - delay[..., None]
-    w = np.sinc(x) * (0.5 + 0.5 * np.cos(np.pi * np.clip(x / half, -1, 1)))
-    return pos, w
+    # x = offs - frac with frac in [0, 1), so |x| <= half. One sine and one cosine pair per delay instead of
+    # per tap: sin(pi (o - f)) = (-1)^(o+1) sin(pi f), cos(pi (o - f) / half) by the angle-difference formula.
+    frac = (delay - fl)[..., None]
+    x = offs - frac
+    sign = np.where(offs % 2, 1.0, -1.0)
+    with np.errstate(divide="ignore", invalid="ignore"):
+        # sin(pi f) from the nearer integer: accurate when f is within rounding of 1 as well as of 0.
+        sinc = np.where(x == 0, 1.0, sign * np.sin(np.pi * np.minimum(frac, 1.0 - frac)) / (np.pi * x))
+    a, b = np.pi * offs / half, np.pi * frac / half
+    hann = 0.5 + 0.5 * (np.cos(a) * np.cos(b) + np.sin(a) * np.sin(b))
+    return pos, sinc * hann
 
 
 def early_rir(image_positions: np.ndarray, reflection: np.ndarray, mics: np.ndarray, fs: int, c: float,
@@ -107,33 +116,44 @@ def fibonacci_sphere(n: int, rng: np.random.Generator | None = None) -> np.ndarr
     return u
 
 
+#: Inter-microphone distances are rounded to this (m) before they shape anything: poses of one rigid array
+#: (distances equal to ~1e-15 m) share one geometry key, and a result depends only on the current array,
+#: never on which array was seen first (an earlier 2 mm tolerance reused whatever geometry came first).
+#: Not coarser: 1 mm rounding changes the diffuse tail enough to change where light_rubble_three seed 0's
+#: robot drives (it then found 1 of 3 callers instead of 3; the behaviour is sensitive to the realisation).
+GEOMETRY_QUANTUM_M = 1e-6
+
+
+def array_distances(mics: np.ndarray) -> np.ndarray:
+    """Inter-microphone distances (M, M) in m, rounded to :data:`GEOMETRY_QUANTUM_M` (a geometry key)."""
+    mics = np.asarray(mics, float)
+    d = np.linalg.norm(mics[:, None, :] - mics[None, :, :], axis=-1)
+    return np.round(d / GEOMETRY_QUANTUM_M) * GEOMETRY_QUANTUM_M
+
+
 def diffuse_mixing(freqs_hz: np.ndarray, mics: np.ndarray, c: float = 343.0) -> np.ndarray:
     """Mixing matrices ``C(f) = Gamma(f)^(1/2)`` (F, M, M) of the spherically isotropic (diffuse)
     coherence ``Gamma_ij = sin(k d_ij) / (k d_ij)``: ``C(f) z(f)`` turns independent unit-variance
     spectra ``z`` into spectra with diffuse-field coherence (Habets & Gannot 2007). The symmetric
     square root varies smoothly with frequency, so the mixing filters are short (~ aperture / c).
-    Depends only on inter-microphone distances: the same for every pose of a rigid array."""
-    mics = np.asarray(mics, float)
+    Depends only on inter-microphone distances (:func:`array_distances`): the same for every pose of a
+    rigid array. Cached on the exact (rounded) geometry and frequencies."""
     freqs = np.asarray(freqs_hz, float)
-    # Distances rounded to 0.1 mm: every pose of a rigid array (whose distances differ only by rounding,
-    # ~1e-16 m) then gets bit-identical mixing, computed from the rounded distances alone. Matching a
-    # cached entry by closeness instead made a run's audio depend on the poses of earlier runs in the
-    # same process (int16 samples off by one LSB; a Dask sweep then disagreed with a local one).
-    d = np.round(np.linalg.norm(mics[:, None, :] - mics[None, :, :], axis=-1), 4)
-    for f_k, d_k, c_k, mix in _MIXING_CACHE:
-        if c_k == c and f_k.shape == freqs.shape and d_k.shape == d.shape and np.array_equal(f_k, freqs) \
-                and np.array_equal(d_k, d):
-            return mix
-    gamma = np.sinc(2.0 * freqs[:, None, None] * d[None] / c)
-    w, v = np.linalg.eigh(gamma)
-    mix = (v * np.sqrt(np.clip(w, 0.0, None))[:, None, :]) @ np.swapaxes(v, 1, 2)
-    _MIXING_CACHE.append((freqs, d, c, mix))
-    del _MIXING_CACHE[:-4]
+    d = array_distances(mics)
+    key = (freqs.size, float(freqs[-1]) if freqs.size else 0.0, freqs.tobytes(), d.tobytes(), float(c))
+    mix = _MIXING_CACHE.get(key)
+    if mix is None:
+        gamma = np.sinc(2.0 * freqs[:, None, None] * d[None] / c)
+        w, v = np.linalg.eigh(gamma)
+        mix = (v * np.sqrt(np.clip(w, 0.0, None))[:, None, :]) @ np.swapaxes(v, 1, 2)
+        _MIXING_CACHE[key] = mix
+        while len(_MIXING_CACHE) > 4:
+            _MIXING_CACHE.pop(next(iter(_MIXING_CACHE)))
     return mix
 
 
-# (freqs, distances, c, mixing): the array geometry and block sizes rarely change.
-_MIXING_CACHE: list[tuple[np.ndarray, np.ndarray, float, np.ndarray]] = []
+# (frequencies, rounded distances, c) -> mixing: the array geometry and block sizes rarely change.
+_MIXING_CACHE: dict[tuple, np.ndarray] = {}
 
 
 class DiffuseTail:
@@ -169,10 +189,13 @@ class DiffuseTail:
 def _smooth_energy(e: np.ndarray, n: int) -> np.ndarray:
     """Centred moving average over ``n`` samples (same length)."""
     n = max(1, int(n))
+    size, h = e.size, n // 2
     c = np.concatenate([[0.0], np.cumsum(e)])
-    lo = np.clip(np.arange(e.size) - n // 2, 0, e.size)
-    hi = np.clip(np.arange(e.size) - n // 2 + n, 0, e.size)
-    return (c[hi] - c[lo]) / n
+    # c[clip(i - h, 0, size)] and c[clip(i - h + n, 0, size)] for i = 0 .. size - 1, as slices.
+    lo = np.concatenate([np.full(min(h, size), c[0]), c[: max(0, size - h)]])
+    k = min(size + 1, n - h)  # first index of the upper bound
+    hi = np.concatenate([c[k: k + size], np.full(max(0, size - (size + 1 - k)), c[size])])
+    return (hi - lo) / n
 
 
 def tail_gain(early: np.ndarray, expected_energy: np.ndarray, start: int, fs: int, smooth_s: float = 0.02) -> np.ndarray:

@@ -201,6 +201,7 @@ class AcousticScene:
         self.surfaces: tuple[Surface, ...] = tuple(room_surfaces + surfaces)
         self.volume = float(np.prod(self.size) - self.obstacle_volume)
         self._wall_objs = None
+        self._box_set = None  # the boxes for wall_images' occlusion tests (diffraction.BoxSet), built on first use
 
     # ------------------------------------------------------------------ geometry helpers
     def _clipped_volume(self, box: Box, box_face_polys: list[np.ndarray]) -> float:
@@ -311,14 +312,29 @@ class AcousticScene:
                                for s in self.surfaces]
         return self._wall_objs
 
-    def image_sources(self, source, receiver, order: int, c: float = 343.0, force_general: bool = False) -> ImageSet:
+    def image_sources(self, source, receiver, order: int, c: float = 343.0, force_general: bool = False,
+                      obstacle_order: int | None = None) -> ImageSet:
         """Image sources of ``source`` up to reflection ``order`` visible from ``receiver`` (world, m).
 
         Shoebox rooms use the engine's closed-form shoebox enumeration (all images visible);
-        rooms with obstacles the general depth-first search with visibility/occlusion tests."""
+        rooms with obstacles the general depth-first search with visibility/occlusion tests.
+        ``obstacle_order`` (< ``order``): the general search stops there, and the orders above it keep only
+        paths between the room walls (:meth:`wall_images`): reflections off obstacle faces beyond that order
+        are left to the diffuse tail. The search's cost grows like ``n_surfaces ** order``; this keeps it at
+        ``n_surfaces ** obstacle_order`` plus a few dozen occlusion tests."""
+        if obstacle_order is not None and obstacle_order < order and not self.is_shoebox and not force_general:
+            low = self.image_sources(source, receiver, obstacle_order, c)
+            high = self.wall_images(source, receiver, order, c, min_order=obstacle_order + 1)
+            return ImageSet(np.vstack([low.positions, high.positions]), np.vstack([low.reflection, high.reflection]),
+                            np.concatenate([low.order, high.order]))
+        return self._engine_images(source, receiver, order, c, shoebox=self.is_shoebox and not force_general)
+
+    def _engine_images(self, source, receiver, order: int, c: float, shoebox: bool) -> ImageSet:
+        """The visible images from pyroomacoustics' engine: the shoebox enumeration of the room walls alone
+        (``shoebox``: every image, no obstacles) or the general search over all surfaces."""
         from pyroomacoustics import libroom
 
-        if self.is_shoebox and not force_general:
+        if shoebox:
             absorption = np.array([m.absorption for m in self.room_materials], np.float32).T  # (bands, 6)
             eng = libroom.Room(self.size.astype(np.float32), absorption, np.zeros_like(absorption), [], float(c),
                                int(order), 1e-7, 1.0, 0.5, 0.004, False)
@@ -336,6 +352,43 @@ class AcousticScene:
         orders = np.array(eng.orders, int)
         visible = np.array(eng.visible_mics, bool)[0]
         return ImageSet(pos[visible], att[visible], orders[visible])
+
+    def wall_images(self, source, receiver, order: int, c: float = 343.0, min_order: int = 0) -> ImageSet:
+        """Images of ``source`` off the room walls only, of order ``min_order .. order``, whose paths to
+        ``receiver`` (world, m) no obstacle box blocks: each image's straight line to the receiver, folded back
+        into the room at the walls it crosses, is the real path; every leg is tested against the boxes."""
+        from .diffraction import BoxSet
+
+        imgs = self._engine_images(source, receiver, order, c, shoebox=True)
+        keep = imgs.order >= min_order
+        pos, att, orders = imgs.positions[keep], imgs.reflection[keep], imgs.order[keep]
+        if self._box_set is None:
+            self._box_set = BoxSet.from_boxes([b for _, b in self.boxes])
+        if pos.shape[0] == 0 or len(self._box_set) == 0:
+            return ImageSet(pos, att, orders)
+        r = np.asarray(receiver, float)
+        size = self.size
+        # Crossings of the line r -> image with the planes k * L (per axis), as fractions t of the line.
+        span = pos - r  # (n, 3)
+        cell = np.floor(pos / size).astype(int)  # the image's room copy; its crossings are |cell| per axis
+        ts = []
+        for ax in range(3):
+            k = np.arange(1, int(np.abs(cell[:, ax]).max(initial=0)) + 1)  # crossing number
+            planes = np.where(cell[:, ax, None] > 0, k[None] * size[ax], (1 - k[None]) * size[ax])
+            with np.errstate(divide="ignore", invalid="ignore"):
+                t = (planes - r[ax]) / span[:, ax, None]
+            ts.append(np.where(k[None] <= np.abs(cell[:, ax, None]), t, np.nan))
+        t = np.sort(np.concatenate([np.zeros((pos.shape[0], 1)), *ts, np.ones((pos.shape[0], 1))], axis=1), axis=1)
+        pts = r + t[..., None] * span[:, None, :]  # (n, k, 3) unfolded breakpoints (NaN: padding, sorted last)
+        u = np.mod(pts, 2 * size)
+        folded = np.where(u > size, 2 * size - u, u)  # back into the room: the real path's nodes
+        a, b = folded[:, :-1], folded[:, 1:]
+        valid = ~np.isnan(b[..., 0])
+        hit = self._box_set.segments_hit(a[valid], b[valid]).any(axis=1)
+        blocked = np.zeros(valid.shape, bool)
+        blocked[valid] = hit
+        ok = ~blocked.any(axis=1)
+        return ImageSet(pos[ok], att[ok], orders[ok])
 
     def first_missing_distance(self, source, receiver, order: int, c: float = 343.0) -> float:
         """Path length (m) of the earliest reflection of order ``order + 1`` off the room walls: up to

@@ -30,7 +30,7 @@ from .diffraction import BoxSet, diffracted_arrivals, room_images
 from .materials import eyring_absorption_for_rt60, uniform_material
 from .noise import AmbientNoise, DiffuseNoiseField
 from .pose import ArrayMount, RobotPose
-from .rir import FRAC_HALF_TAPS, DiffuseTail, early_rir, tail_gain
+from .rir import FRAC_HALF_TAPS, DiffuseTail, array_distances, early_rir, tail_gain
 from .scene import AcousticScene, ImageSet
 from .sensor import Sensor, SensorConfig
 from .sources import PAPER_LEVEL_DB_SPL, SoundSource, victim_source
@@ -54,8 +54,12 @@ class AcousticConfig:
     rounded to this before simulating (cache key). ``victim_*``: defaults for ``world.victims``.
     ``diffraction``: add the paths bent over/around an obstacle that blocks the direct sound or a
     first-order wall reflection (ISO 9613-2 barrier attenuation, see :mod:`.diffraction`).
-    ``noise_loop_s``: if set, the ambient field and the sensor self-noise repeat with this period (rounded
-    up to 8192-sample frames, at most 16 s): computed once, then cached - the env's fast fidelity.
+    ``obstacle_order``: if set (< ``ism_order``), reflections off obstacle faces are modelled up to this order
+    only; the orders above it keep the paths between the room walls (checked for occlusion by the boxes) and
+    leave the rest to the diffuse tail (``AcousticScene.image_sources``; the search's cost falls from
+    ``n_surfaces ** ism_order`` to ``n_surfaces ** obstacle_order``). ``noise_loop_s``: if set, the ambient
+    field and the sensor self-noise repeat with this period (rounded up to 8192-sample frames, at most 16 s):
+    computed once, then cached - the env's fast fidelity.
     """
 
     fs: int = 16000
@@ -74,6 +78,7 @@ class AcousticConfig:
     rir_cache_size: int = 32
     diffraction: bool = True
     noise_loop_s: float | None = None
+    obstacle_order: int | None = None
     victim_sound: str = "calls"
     victim_level_db_spl: float = PAPER_LEVEL_DB_SPL
 
@@ -88,6 +93,9 @@ class AcousticConfig:
             raise ValueError(f"AcousticConfig.rt60_s: expected None or a time >= 0 s, got {self.rt60_s}")
         if self.noise_loop_s is not None and not 0 < self.noise_loop_s <= 16.384:
             raise ValueError(f"AcousticConfig.noise_loop_s: expected None or 0 < s <= 16.384, got {self.noise_loop_s}")
+        if self.obstacle_order is not None and not 0 <= self.obstacle_order <= self.ism_order:
+            raise ValueError(f"AcousticConfig.obstacle_order: expected None or 0..ism_order ({self.ism_order}), "
+                             f"got {self.obstacle_order}")
         if self.position_quantum_m <= 0 or self.visibility_grid_m <= 0:
             raise ValueError("AcousticConfig.position_quantum_m and visibility_grid_m must be > 0 m")
 
@@ -136,7 +144,13 @@ class AcousticSimulator:
             alpha = eyring_absorption_for_rt60(cfg.rt60_s, scene.volume, float(areas.sum()), cfg.c)
             scene = AcousticScene(world, cfg.min_obstacle_extent_m, material_override=uniform_material(alpha))
         self.scene = scene
-        self.ism_order = scene.max_order_for_budget(cfg.ism_order, cfg.ism_budget)
+        if cfg.obstacle_order is not None and cfg.obstacle_order < cfg.ism_order:
+            # The general search runs to obstacle_order only (the budget applies to it); walls go to ism_order.
+            self.ism_order = cfg.ism_order
+            self.obstacle_order = scene.max_order_for_budget(cfg.obstacle_order, cfg.ism_budget)
+        else:
+            self.ism_order = scene.max_order_for_budget(cfg.ism_order, cfg.ism_budget)
+            self.obstacle_order = None
         if self.ism_order < cfg.ism_order:
             warnings.warn(
                 f"image-source order reduced from {cfg.ism_order} to {self.ism_order}: {len(scene.surfaces)} surfaces "
@@ -161,7 +175,7 @@ class AcousticSimulator:
         self._sensors: dict[int, Sensor] = {}
         self._images: OrderedDict[tuple, ImageSet] = OrderedDict()
         self._first_missing: dict[tuple, float] = {}
-        self._tails: dict[int, list[tuple[np.ndarray, DiffuseTail]]] = {}
+        self._tails: dict[tuple[int, bytes], DiffuseTail] = {}
         self._rirs: OrderedDict[bytes, _PoseRirs] = OrderedDict()
         self._sources: list[SoundSource] = []
         if sources is None:
@@ -212,7 +226,7 @@ class AcousticSimulator:
             self._images.move_to_end(key)
         else:
             ref = self.scene.size / 2 if recv is None else recv
-            imgs = self.scene.image_sources(src, ref, self.ism_order, cfg.c)
+            imgs = self.scene.image_sources(src, ref, self.ism_order, cfg.c, obstacle_order=self.obstacle_order)
             self._images[key] = imgs
             if len(self._images) > 512:
                 self._images.popitem(last=False)
@@ -238,17 +252,20 @@ class AcousticSimulator:
         return diffracted_arrivals(src, centre, self._boxes, self.scene.size, self._wall_reflection, present)
 
     def _tail(self, k: int, mics: np.ndarray) -> DiffuseTail:
-        # Rigid array: one tail per source serves every pose (matched on inter-mic distances within 2 mm).
-        d = np.linalg.norm(mics[:, None] - mics[None], axis=-1)
-        for dk, t in self._tails.get(k, []):
-            if dk.shape == d.shape and np.allclose(dk, d, atol=2e-3):
-                return t
+        # Rigid array: one tail per source serves every pose (keyed on the inter-mic distances rounded to 1 um
+        # from the unquantised ``mics``: every pose of a rigid array gives the same key, whatever came before).
+        key = (k, array_distances(mics).tobytes())
+        t = self._tails.get(key)
+        if t is not None:
+            return t
         cfg = self.config
         rng = np.random.default_rng([cfg.seed & 0xFFFFFFFF, 0x7A11, k])
         t = DiffuseTail(self.rt60_bands, self.scene.volume, cfg.fs, cfg.c, self._tail_draw_length, rng, mics)
         L = self.rir_length - self.N_PRE
         t.tail, t.expected_energy, t.length = t.tail[:, :L], t.expected_energy[:L], L
-        self._tails.setdefault(k, []).append((d, t))
+        self._tails[key] = t
+        if len(self._tails) > 4 * max(1, len(self._sources)):
+            self._tails.pop(next(iter(self._tails)))
         return t
 
     def impulse_responses(self, mic_positions_world) -> np.ndarray:
@@ -258,7 +275,7 @@ class AcousticSimulator:
 
     def _pose_rirs(self, mics: np.ndarray) -> _PoseRirs:
         cfg = self.config
-        mics = self._quantise(mics, cfg.position_quantum_m)
+        raw, mics = mics, self._quantise(mics, cfg.position_quantum_m)
         key = mics.tobytes()
         hit = self._rirs.get(key)
         if hit is not None:
@@ -278,7 +295,7 @@ class AcousticSimulator:
                 l_early = min(L, n_pre + int(np.ceil(d_max / cfg.c * cfg.fs)) + FRAC_HALF_TAPS + 2 * n_pre)
                 out[k, :, :l_early] = early_rir(positions, reflection, mics, cfg.fs, cfg.c, n_pre, l_early)
             if cfg.late_reverb and self.rt60_bands.max() > 0:
-                tail = self._tail(k, mics)
+                tail = self._tail(k, raw)
                 start = int(round(first_missing / cfg.c * cfg.fs)) if np.isfinite(first_missing) else L
                 g = tail_gain(out[k, :, n_pre:], tail.expected_energy, start, cfg.fs)
                 out[k, :, n_pre:] += g * tail.tail
