@@ -6,10 +6,20 @@ Pose ``(x, y, yaw)`` in m, m, rad; yaw CCW from the odometry frame's +x.
 """
 from __future__ import annotations
 
+from typing import NamedTuple
+
 import numpy as np
 
 from robot.hal import WheelOdometry
 from robot.kinematics import OmniDriveParams, forward_kinematics, integrate_pose
+
+
+class Pose2D(NamedTuple):
+    """Planar pose in the odometry/world frame: x, y (m), yaw (rad, CCW from +x)."""
+
+    x: float
+    y: float
+    yaw: float
 
 
 class Odometry:
