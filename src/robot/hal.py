@@ -76,6 +76,7 @@ class DriveStatus:
     bumper: bool = False          # a collision/contact is sensed now
     stalled: bool = False         # wheels commanded but not turning
     faults: tuple[str, ...] = field(default_factory=tuple)  # e.g. ("watchdog", "overcurrent")
+    yaw_rate: float | None = None  # gyro rate about the robot's +z (rad/s, CCW), None if unavailable
 
     @property
     def ok(self) -> bool:

@@ -285,7 +285,7 @@ class RescueBehaviour:
     # -- the cycle ----------------------------------------------------------------
     def _cycle(self) -> None:
         if not self._odo_started:
-            self.odometry.update(self.drive.odometry())
+            self._update_odometry()
             self._odo_started = True
         self.state = RescueState.LISTEN
         status = self.drive.status()
@@ -559,7 +559,7 @@ class RescueBehaviour:
 
     # -- motion primitives (odometry feedback) ---------------------------------------
     def _update_odometry(self) -> np.ndarray:
-        return self.odometry.update(self.drive.odometry())
+        return self.odometry.update(self.drive.odometry(), self.drive.status().yaw_rate)
 
     def _check_motion(self, bumper_armed: bool) -> None:
         st = self.drive.status()
