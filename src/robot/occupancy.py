@@ -130,7 +130,9 @@ class OccupancyGrid:
         if self._blocked is None:
             occ = self.occupied
             if occ.any():
-                self._blocked = ndimage.distance_transform_edt(~occ) * self.resolution < self.config.robot_radius_m
+                # An obstacle may fill its cell up to the edge: grow by half a cell more than the radius.
+                reach = self.config.robot_radius_m + 0.5 * self.resolution
+                self._blocked = ndimage.distance_transform_edt(~occ) * self.resolution < reach
             else:
                 self._blocked = np.zeros_like(occ)
         return self._blocked
