@@ -10,6 +10,7 @@ from robot.odometry import Odometry
 from robot.replay import DryRunDrive
 from robot.rescue import RescueBehaviour, RescueConfig, RescueEvent, RescueState
 from ssl_core.geometry import cube8
+from sound_dataset import recordings
 
 FS = 16000
 ROBOT_RADIUS = 0.2  # m, bumper ring
@@ -422,7 +423,7 @@ def test_voice_likeness_separates_voice_from_noise_hum_and_high_tones():
 
 
 def test_beam_toward_a_plane_wave_recovers_it_and_attenuates_other_directions():
-    from robot.voice import beamform
+    from ssl_core.beamform import beam_signal as beamform
     rng = np.random.default_rng(1)
     s = rng.standard_normal(FS)
     u = np.array([math.cos(0.4) * math.cos(-0.3), math.sin(0.4) * math.cos(-0.3), math.sin(-0.3)])
@@ -461,6 +462,10 @@ class RenderedAudio(FakeAudio):
         return AudioBlock(out[:, pad:pad + n] + self.noise * self.rng.standard_normal((8, n)), FS, t0)
 
 
+def _recording(name):
+    return next(r for r in recordings("test") if r.name == name)
+
+
 @pytest.mark.parametrize("noise_gain", [0.0, 0.5])
 def test_end_to_end_two_voices_with_the_real_localizer(noise_gain):
     from ssl_core.localizer import Localizer, LocalizerConfig
@@ -471,6 +476,12 @@ def test_end_to_end_two_voices_with_the_real_localizer(noise_gain):
     rng = np.random.default_rng(0)
     sigs = [0.01 * _voice(n, 1, 120), 0.008 * _voice(n, 2, 200)] + [0.01 * noise_gain * rng.standard_normal(n)] * bool(
         noise_gain)
+    if not noise_gain:  # real recorded speech (data/sounds test part: a man, a woman), looped; the first 6 dB
+        # louder (the model voices' 0.01/0.008 are within 0.5 dB at the robot: too close for pausing speech)
+        sigs = [np.resize(r.samples, n) * g * np.sqrt(np.mean(sigs[0] ** 2) / np.mean(r.samples**2))
+                for r, g in ((_recording("it_carlo"), 1.0), (_recording("fr_june"), 0.5))]
+        # (with the white noise the localizer reports only the noise for real, pausing speech: issue 11's
+        # detection; the synthetic continuous voices keep that case about the behaviour)
     loc = Localizer(cube8(), LocalizerConfig(fs=FS, n_sources=3, rel_threshold=0.15))
     b = make(w, RescueConfig(max_victims=len(sigs)), audio=RenderedAudio(w, sigs), localizer=loc)
     ev = b.run(max_time=300.0)
@@ -481,8 +492,8 @@ def test_end_to_end_two_voices_with_the_real_localizer(noise_gain):
     if not noise_gain:
         # the louder (nearer) voice first, and both were recognised as voices
         assert math.dist(found[0], voices[0].position[:2]) < 0.15
-        assert all(v.voice > 0.3 for v in b.victims)
+        assert all(v.voice >= b.config.voice_threshold for v in b.victims)
     else:
         # Broadband noise dominates SRP-PHAT even 6 dB below the voices: it is the only source reported
         # at first, so it is approached (and "found") first - then the voices.
-        assert math.dist(found[0], noise[0].position[:2]) < 0.3 and b.victims[0].voice < 0.3
+        assert math.dist(found[0], noise[0].position[:2]) < 0.3 and b.victims[0].voice < b.config.voice_threshold

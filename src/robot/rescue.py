@@ -10,7 +10,7 @@ made robust for a mission with several victims:
   its azimuth and its elevation match the bearing and the expected elevation
   of the stored position from the current pose);
 * **choose** the target: the highest-energy source (as in the paper), but
-  voice-like sources (``robot.voice``) first, and the current target kept
+  voice sources (``robot.vad`` on a beam toward each) first, and the current target kept
   unless another is ``switch_ratio_db`` louder (no dithering between two voices);
 * **found** when the victim is close, by one of three stated criteria:
   (1) the detection's elevation is steeper than ``found_elevation_deg`` below
@@ -49,7 +49,8 @@ import numpy as np
 from robot.hal import AudioSource, Clock, DriveBase, DriveStatus, as_float_audio
 from robot.kinematics import OmniDriveParams
 from robot.odometry import Odometry, wrap_angle
-from robot.voice import beamform, voice_likeness
+from robot.vad import SileroVad, speech_fraction
+from ssl_core.beamform import beam_signal
 
 log = logging.getLogger(__name__)
 
@@ -77,7 +78,8 @@ class RescueConfig:
     # choosing
     prefer_voice: bool = True              # voice-like sources before louder non-voice ones
     require_voice: bool = False            # never approach a non-voice source
-    voice_threshold: float = 0.3           # robot.voice score (0..1) counted as voice-like
+    voice_threshold: float = 0.2           # VAD speech-frame fraction of the beam counted as voice (>= 0.2 of
+                                           # a 1 s chunk: 100 % of speech, 0 % of non-speech chunks, data/sounds test)
     switch_ratio_db: float = 3.0           # another source must be this much louder to replace the target
     track_gate_deg: float = 25.0           # a detection this close to the target's predicted azimuth is it
     # found victims
@@ -225,6 +227,7 @@ class RescueBehaviour:
         if loc_fs is not None and int(loc_fs) != audio.sample_rate:
             raise ValueError(f"localizer fs is {loc_fs} Hz but the audio source delivers {audio.sample_rate} Hz")
         self.odometry = Odometry(params, start_pose)
+        self._vad: SileroVad | None = None  # created on first use (loads the ONNX model)
         self.state = RescueState.LISTEN
         self.events: list[RescueEvent] = []
         self.victims: list[FoundVictim] = []
@@ -353,8 +356,10 @@ class RescueBehaviour:
                 direction = getattr(d, "direction", None)
                 if direction is None:
                     direction = [math.cos(az) * math.cos(el), math.sin(az) * math.cos(el), math.sin(el)]
-                beam = beamform(x, self._mic_positions, direction, self.audio.sample_rate)
-                voice = voice_likeness(beam, self.audio.sample_rate).score
+                beam = beam_signal(x, self._mic_positions, direction, self.audio.sample_rate)
+                if self._vad is None:
+                    self._vad = SileroVad()
+                voice = speech_fraction(self._vad.probabilities(beam, self.audio.sample_rate))
                 if energy is None:
                     energy = 10 * math.log10(max(float(np.mean(beam**2)), 1e-20))
             if energy is None:

@@ -20,9 +20,10 @@ from ssl_core.geometry import ArrayGeometry, get_array
 from ssl_core.grid import SphericalGrid, azimuth_elevation, make_grid
 from ssl_core.noise import NoiseFloor
 from ssl_core.peaks import local_maxima, neighbour_table
+from ssl_core.beamform import FULL_SCALE_SINE_MS as _FULL_SCALE_SINE_MS
+from ssl_core.beamform import arrival_times, delay_and_sum
 from ssl_core.srp import SOUND_SPEED, SteeringTable, tdoa_table
 
-_FULL_SCALE_SINE_MS = 0.5  # mean square of a full-scale sine: 0 dBFS
 
 
 @dataclass(frozen=True)
@@ -332,13 +333,7 @@ class Localizer:
     def _beam_level(self, spec: np.ndarray, fine_index: int) -> float:
         """Band level (dB re full-scale sine) of the delay-and-sum beam toward a fine grid point."""
         g = self.fine_grid
-        u = g.directions[fine_index]
-        mics = self.geometry.positions
-        if g.radius is None:
-            arrival = -(mics @ u) / self.config.sound_speed
-        else:
-            arrival = np.linalg.norm(g.radius * u - mics, axis=1) / self.config.sound_speed
-        steer = np.exp(1j * np.outer(arrival, self._omega))  # undo each mic's delay
-        beam = (spec * steer[:, None, :]).mean(axis=0)
+        arrival = arrival_times(self.geometry.positions, g.directions[fine_index], self.config.sound_speed, g.radius)
+        beam = delay_and_sum(spec, self._omega / (2 * np.pi), arrival)
         ms = (np.abs(beam) ** 2).sum(axis=-1).mean() * self._ms_scale
         return float(10 * np.log10(max(ms, 1e-30) / _FULL_SCALE_SINE_MS))
