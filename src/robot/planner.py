@@ -4,9 +4,11 @@ exploration goal when the map holds no unfound victim.
 Frames: world/odometry frame (x, y in m). Inputs are the ``SoundMap``'s sources and the ``OccupancyGrid``.
 
 * **target** (``choose_target``): unfound sources classified victim; while none is, unknown sources (not yet
-  classified: a caller who has not called long enough); interferers never (issue 12: never approach a
-  non-voice source while a voice source exists; and with none, exploring finds more than a pump does).
-  Utility = P(victim) x exp(-age / ``recency_s``) / (1 + path length / ``distance_scale_m``), the current
+  classified: a caller who has not called long enough); interferers only when nothing else is mapped (issue
+  12: never approach a non-voice source while a voice source exists), to check them from close up, where
+  the behaviour rejects them for good if still no voice is heard.
+  Utility = P(victim) x exp(-age / ``recency_s``) / (1 + path length / ``distance_scale_m``)
+  / (1 + 1-sigma / ``sigma_scale_m``) (a single bearing's guess counts less than a triangulated source), the current
   target's utility times ``keep_factor`` (no dithering between two callers: measured, the reactive behaviour
   made 21 turns between two intermittent callers on light_rubble_three seed 6).
 * **path** (``plan``): Dijkstra (``scipy.sparse.csgraph``) on the grid's free cells (unknown counts as
@@ -61,7 +63,8 @@ class PlannerConfig:
     recency_s: float = 60.0            # a source unheard this long counts 1/e as much
     distance_scale_m: float = 3.0      # path length that halves a target's utility
     keep_factor: float = 1.5           # the current target's utility is multiplied by this
-    min_victim_probability: float = 0.2  # an unknown source needs at least this to be a target
+    sigma_scale_m: float = 0.5         # position uncertainty (1 sigma) that halves a target's utility
+    min_listens: int = 2               # an interferer is checked once heard this often (not a stray reflection)
     stop_radius_m: float = 0.35        # plan to within this of a source's estimate
     unreachable_retry_s: float = 30.0  # a target without a path is skipped this long
     explore_distance_m: float = 1.2
@@ -75,7 +78,8 @@ class PlannerConfig:
         need(self.recency_s > 0, "recency_s", "> 0 s")
         need(self.distance_scale_m > 0, "distance_scale_m", "> 0 m")
         need(self.keep_factor >= 1, "keep_factor", ">= 1")
-        need(0 <= self.min_victim_probability <= 1, "min_victim_probability", "a probability in [0, 1]")
+        need(self.sigma_scale_m > 0, "sigma_scale_m", "> 0 m")
+        need(self.min_listens >= 1, "min_listens", "an integer >= 1")
         need(self.stop_radius_m >= 0, "stop_radius_m", ">= 0 m")
         need(self.unreachable_retry_s >= 0, "unreachable_retry_s", ">= 0 s")
         need(self.explore_distance_m > 0, "explore_distance_m", "> 0 m")
@@ -164,15 +168,17 @@ class Planner:
                       current: int | None = None) -> tuple[MapSource | None, Plan | None, str]:
         """The source to approach and the path to it, or (None, None, why)."""
         cfg = self.config
-        open_ = [s for s in sources if s.state is not SourceState.FOUND
+        open_ = [s for s in sources if s.state not in (SourceState.FOUND, SourceState.REJECTED)
                  and time - self._unreachable.get(s.id, -math.inf) >= cfg.unreachable_retry_s]
         victims = [s for s in open_ if s.cls is SourceClass.VICTIM]
-        pool = victims or [s for s in open_ if s.cls is SourceClass.UNKNOWN
-                           and s.victim_probability >= cfg.min_victim_probability]
-        n_int = sum(s.cls is SourceClass.INTERFERER for s in open_)
+        unknown = [s for s in open_ if s.cls is SourceClass.UNKNOWN]
+        interferers = [s for s in open_ if s.cls is SourceClass.INTERFERER and s.n_inliers >= cfg.min_listens]
+        # Interferers only when nothing else is mapped: reached, they are rejected (a victim whose voice the
+        # VAD missed from afar is heard from close up).
+        pool = victims or unknown or interferers
+        n_int = len(interferers) if pool is not interferers else 0
         if not pool:
-            why = "no unfound victim or unclassified source mapped"
-            return None, None, why + (f" ({n_int} interferer(s) mapped, not approached)" if n_int else "")
+            return None, None, "no unfound source mapped"
         search = self.distances(grid, pose[:2])
         best = None
         for s in pool:
@@ -181,7 +187,7 @@ class Planner:
                 self.mark_unreachable(s.id, time)
                 continue
             u = s.victim_probability * math.exp(-max(time - s.last_time, 0.0) / cfg.recency_s) \
-                / (1.0 + plan.length / cfg.distance_scale_m)
+                / (1.0 + plan.length / cfg.distance_scale_m) / (1.0 + s.horizontal_sigma_m / cfg.sigma_scale_m)
             if s.id == current:
                 u *= cfg.keep_factor
             if best is None or u > best[0]:
@@ -189,7 +195,8 @@ class Planner:
         if best is None:
             return None, None, f"no path to any of {len(pool)} candidate source(s) on the learned grid"
         u, s, plan = best
-        kind = "victim" if s.cls is SourceClass.VICTIM else "unclassified source"
+        kind = {SourceClass.VICTIM: "victim", SourceClass.UNKNOWN: "unclassified source",
+                SourceClass.INTERFERER: "interferer (nothing else mapped: go and check)"}[s.cls]
         why = (f"{kind} #{s.id} at ({s.position[0]:.2f}, {s.position[1]:.2f}) m +- {s.horizontal_sigma_m:.2f} m, "
                f"P(victim) {s.victim_probability:.2f}, path {plan.length:.2f} m, heard {time - s.last_time:.0f} s ago")
         if n_int:

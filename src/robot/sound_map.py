@@ -23,11 +23,15 @@ apart give < 0.3 m):
   ray from a new pose anywhere along that first ray. The track id is a hint: a track that fed a source
   keeps feeding it while its rays stay within the gate. Two rays of one update never join one source.
 
-Class: the victim probability is the recency-weighted mean of the voice probabilities of the source's
-inlier listens (``robot.hearing`` accumulates them per track); victim above ``victim_probability``,
-interferer below ``interferer_probability`` once ``min_listens_to_classify`` listens back it.
-State: ``UNVISITED`` -> ``APPROACHING`` -> ``FOUND`` (set by the behaviour). A found source stays found:
-rays that associate to it, or a new source born within ``merge_distance_m`` of it, are absorbed.
+Class: each inlier listen is independent evidence: the victim probability is the sigmoid of the sum of
+the listens' voice log-odds (prior 0.5), clipped to +-``max_log_odds`` so either class can be overturned.
+With per-listen evidence (``robot.listening``: 0.9 for a listen whose beam had speech, 0.42 for one
+without) one listen with speech outweighs seven without: a caller who pauses stays a victim, a machine
+heard in a dozen listens without a speech frame becomes an interferer. Victim at or above
+``victim_probability``, interferer at or below ``interferer_probability``, unknown between.
+State: ``UNVISITED`` -> ``APPROACHING`` -> ``FOUND`` (set by the behaviour), or ``REJECTED`` (visited and
+still no voice: a machine). A found source stays found: rays that associate to it, or a new source born
+within ``merge_distance_m`` of it, are absorbed.
 """
 from __future__ import annotations
 
@@ -65,6 +69,7 @@ class SourceState(str, Enum):
     UNVISITED = "unvisited"
     APPROACHING = "approaching"
     FOUND = "found"
+    REJECTED = "rejected"
 
 
 @dataclass(frozen=True)
@@ -84,10 +89,9 @@ class SoundMapConfig:
     merge_distance_m: float = 0.5          # two sources closer than this (horizontally) are one
     max_rays: int = 120                    # history kept per source (newest)
     forget_s: float = 40.0                 # a source with < 3 listens unheard this long is dropped
-    victim_probability: float = 0.6        # class thresholds on the mean voice probability
-    interferer_probability: float = 0.35
-    min_listens_to_classify: int = 2
-    voice_memory_s: float = 60.0           # e-folding age of a listen's weight in the class probability
+    victim_probability: float = 0.6        # class thresholds on the accumulated voice probability
+    interferer_probability: float = 0.15   # (0.15: seven listens without speech from the prior)
+    max_log_odds: float = 6.0              # |sum of listen log-odds| cap
     max_range_m: float = 15.0              # no source farther than this from where it was heard
     seed: int = 0                          # RANSAC sampling
 
@@ -109,8 +113,7 @@ class SoundMapConfig:
         need(self.forget_s > 0, "forget_s", "> 0 s")
         need(0 <= self.interferer_probability <= self.victim_probability <= 1, "victim_probability",
              f"in [interferer_probability ({self.interferer_probability}), 1]")
-        need(self.min_listens_to_classify >= 1, "min_listens_to_classify", "an integer >= 1")
-        need(self.voice_memory_s > 0, "voice_memory_s", "> 0 s")
+        need(self.max_log_odds > 0, "max_log_odds", "> 0")
         need(self.max_range_m > 0, "max_range_m", "> 0 m")
 
 
@@ -371,6 +374,8 @@ class SoundMap:
     def set_state(self, source_id: int, state: SourceState, time: float | None = None) -> None:
         """Behaviour's verdict; a found source never goes back."""
         src = self._get(source_id)
+        if src.state in (SourceState.FOUND, SourceState.REJECTED) and state is not SourceState.FOUND:
+            return
         if src.state is SourceState.FOUND:
             return
         src.state = SourceState(state)
@@ -486,15 +491,10 @@ class SoundMap:
     def _snapshot(self, s: _Source) -> MapSource:
         cfg = self.config
         inl = [r for r, ok in zip(s.rays, s.inliers) if ok] if len(s.inliers) == len(s.rays) else list(s.rays)
-        if inl:
-            age = np.array([self.time - r.time for r in inl])
-            w = np.exp(-np.maximum(age, 0) / cfg.voice_memory_s) * np.array([max(r.activity, 0.1) for r in inl])
-            pv = float(np.sum(w * np.array([r.voice_probability for r in inl])) / np.sum(w))
-        else:
-            pv = 0.5
-        if len(inl) < cfg.min_listens_to_classify:
-            cls = SourceClass.UNKNOWN
-        elif pv >= cfg.victim_probability:
+        p = np.clip([r.voice_probability for r in inl], 1e-3, 1 - 1e-3)
+        log_odds = float(np.clip(np.sum(np.log(p / (1 - p))), -cfg.max_log_odds, cfg.max_log_odds))
+        pv = 1.0 / (1.0 + math.exp(-log_odds))
+        if pv >= cfg.victim_probability:
             cls = SourceClass.VICTIM
         elif pv <= cfg.interferer_probability:
             cls = SourceClass.INTERFERER

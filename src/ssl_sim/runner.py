@@ -38,7 +38,7 @@ from scipy import sparse
 from scipy.sparse.csgraph import dijkstra
 
 from robot.odometry import wrap_angle
-from robot.rescue import RescueBehaviour, RescueEvent
+from robot.rescue import Decision, RescueBehaviour, RescueEvent
 from ssl_core.geometry import cube8
 from ssl_core.localizer import Localizer
 from ssl_sim.acoustics import AcousticSimulator
@@ -183,7 +183,7 @@ class RescueRun:
         self.clock = _TracingClock(robot, self._on_tick)
         self.localizer = _RecordingLocalizer(Localizer(cube8(), sc.localizer), self._on_result)
         self.behaviour = RescueBehaviour(self.audio, self.drive, self.clock, self.localizer, sc.behaviour,
-                                         params=robot.params, start_pose=world.robot_start)
+                                         params=robot.params, start_pose=world.robot_start, **sc.stage_configs())
         self.paths = FreeSpacePaths(world)
         # truth bookkeeping
         self._obstacle_blocks = [not b.climbable for b in world.obstacles]
@@ -299,13 +299,14 @@ class RescueRun:
         for ev in events:
             self.events.append(ev)
             if self.logger.enabled:
-                level = "WARN" if ev.decision in ("recover", "stuck", "drive_fault", "error") else "INFO"
+                level = "WARN" if ev.decision in (Decision.RECOVER, Decision.STUCK, Decision.DRIVE_FAULT,
+                                                  Decision.ERROR) else "INFO"
                 self.logger.event(ev.time, ev.state.value, str(ev), level)
-                if ev.decision == "target" and self.audio.last_array_poses:
+                if ev.decision is Decision.TARGET and self.audio.last_array_poses:
                     # Decided right after the listen: the array pose at the end of that block.
                     origin, rot = self.audio.last_array_poses[-1]
                     self.logger.target(ev.time, origin, rot @ _unit(ev.data["azimuth"], ev.data["elevation"]))
-            if ev.decision != "victim_found":
+            if ev.decision is not Decision.VICTIM_FOUND:
                 continue
             _, x, y, _, yaw = self._pose_at(ev.time)
             est = ev.data.get("position", (math.nan, math.nan))
@@ -410,7 +411,7 @@ class RescueRun:
         acou = self.audio.timing["acoustics"]
         loc = self.localizer.seconds
         sim_t = self.robot.time
-        bumps = sum(1 for e in self.events if e.decision == "recover" and e.data.get("bumper"))
+        bumps = sum(1 for e in self.events if e.decision is Decision.RECOVER and e.data.get("bumper"))
         return {
             "scenario": sc.name, "scenario_file": sc.path, "seed": self.seed, "scene": self.world.name,
             "description": sc.description,
@@ -426,6 +427,7 @@ class RescueRun:
             "listens": self.listens,
             "events": [str(e) for e in self.events],
             "config": {"behaviour": asdict(sc.behaviour), "localizer": asdict(sc.localizer),
+                       **{k: asdict(v) for k, v in sc.stage_configs().items()},
                        "acoustics": dict(sc.acoustics),
                        "noise": asdict(sc.noise) if sc.noise is not None else None},
             "wall_clock_s": {"setup": _r(self.setup_s, 3), "loop": _r(loop_s, 3), "physics": _r(phys, 3),
