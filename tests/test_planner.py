@@ -54,7 +54,7 @@ def _src(i, xy, p, cls, state=SourceState.UNVISITED, last=10.0):
     return MapSource(i, np.array([*xy, 0.1]), np.eye(3) * 0.01, p, cls, state, 5, 5, 0.0, last, -30.0, -30.0, ())
 
 
-def test_target_prefers_victims_never_interferers_nor_found():
+def test_target_prefers_victims_interferers_last_never_found_or_rejected():
     g = OccupancyGrid()
     pump = _src(0, (0.8, 0.0), 0.05, SourceClass.INTERFERER)
     far_victim = _src(1, (3.0, 0.0), 0.9, SourceClass.VICTIM)
@@ -62,11 +62,14 @@ def test_target_prefers_victims_never_interferers_nor_found():
     unknown = _src(3, (0.5, -0.5), 0.5, SourceClass.UNKNOWN)
     pl = Planner()
     s, plan, why = pl.choose_target([pump, far_victim, found, unknown], g, (0.0, 0.0, 0.0), 12.0)
-    assert s.id == 1 and plan is not None and "interferer" in why
+    assert s.id == 1 and plan is not None          # the far victim, not the near pump or unknown source
     s, _, _ = pl.choose_target([pump, found, unknown], g, (0.0, 0.0, 0.0), 12.0)
-    assert s.id == 3                                    # no victim: the unclassified one, not the pump
-    s, plan, why = pl.choose_target([pump, found], g, (0.0, 0.0, 0.0), 12.0)
-    assert s is None and plan is None and "1 interferer" in why
+    assert s.id == 3                                # no victim: the unclassified one, not the pump
+    s, _, why = pl.choose_target([pump, found], g, (0.0, 0.0, 0.0), 12.0)
+    assert s.id == 0 and "check" in why             # only a machine mapped: go and check it
+    rejected = _src(0, (0.8, 0.0), 0.05, SourceClass.INTERFERER, SourceState.REJECTED)
+    s, plan, _ = pl.choose_target([rejected, found], g, (0.0, 0.0, 0.0), 12.0)
+    assert s is None and plan is None
 
 
 def test_current_target_kept_unless_clearly_better():

@@ -71,13 +71,15 @@ class Listen:
 
 class Listener:
     """``listen(seconds, settle_s, min_power)`` -> ``Listen``. ``mic_positions`` (n, 3) m, array frame (None:
-    no beam, no voice evidence)."""
+    no beam, no voice evidence). ``speech`` replaces the VAD: ``speech(samples, detection, direction)`` -> the
+    speech-frame fraction (0..1) toward that detection (replayed annotations, tests)."""
 
     def __init__(self, audio: AudioSource, clock: Clock, localizer: Any, mic_positions: np.ndarray | None,
-                 voice_threshold: float = 0.2) -> None:
+                 voice_threshold: float = 0.2, speech=None) -> None:
         self.audio, self.clock, self.localizer = audio, clock, localizer
         self.mic_positions = mic_positions
         self.voice_threshold = voice_threshold
+        self.speech = speech
         self._vad: SileroVad | None = None   # created on first use (loads the ONNX model)
 
     def listen(self, seconds: float, settle_s: float, min_power: float) -> Listen:
@@ -109,7 +111,9 @@ class Listener:
                            float)
             level = getattr(d, "level_db", None)
             frac = 0.0
-            if self.mic_positions is not None:
+            if self.speech is not None:
+                frac = float(self.speech(block.samples, d, u))
+            elif self.mic_positions is not None:
                 x = as_float_audio(block.samples) if x is None else x
                 beam = beam_signal(x, self.mic_positions, u, self.audio.sample_rate)
                 if self._vad is None:

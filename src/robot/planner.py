@@ -64,9 +64,13 @@ class PlannerConfig:
     distance_scale_m: float = 3.0      # path length that halves a target's utility
     keep_factor: float = 1.5           # the current target's utility is multiplied by this
     sigma_scale_m: float = 0.5         # position uncertainty (1 sigma) that halves a target's utility
+    stale_s: float = 45.0              # a source not classified victim and unheard this long is no target
+    max_sigma_m: float = 20.0          # not a target while more uncertain (a bearing above the horizon: no range)
+    probe_sigma_m: float = 1.0         # more uncertain than this: drive probe_distance_m along its bearing
+    probe_distance_m: float = 1.5
     min_listens: int = 2               # an interferer is checked once heard this often (not a stray reflection)
     stop_radius_m: float = 0.35        # plan to within this of a source's estimate
-    unreachable_retry_s: float = 30.0  # a target without a path is skipped this long
+    unreachable_retry_s: float = 60.0  # a target without a path (or that bumps too often) is skipped this long
     explore_distance_m: float = 1.2
     explore_headings: int = 16
 
@@ -79,6 +83,9 @@ class PlannerConfig:
         need(self.distance_scale_m > 0, "distance_scale_m", "> 0 m")
         need(self.keep_factor >= 1, "keep_factor", ">= 1")
         need(self.sigma_scale_m > 0, "sigma_scale_m", "> 0 m")
+        need(self.max_sigma_m > 0, "max_sigma_m", "> 0 m")
+        need(self.probe_sigma_m > 0 and self.probe_distance_m > 0, "probe_sigma_m", "> 0 m (and probe_distance_m)")
+        need(self.stale_s > 0, "stale_s", "> 0 s")
         need(self.min_listens >= 1, "min_listens", "an integer >= 1")
         need(self.stop_radius_m >= 0, "stop_radius_m", ">= 0 m")
         need(self.unreachable_retry_s >= 0, "unreachable_retry_s", ">= 0 s")
@@ -127,7 +134,9 @@ class Planner:
         reach = near & np.isfinite(dist[nodes])
         if not np.any(reach):
             return None
-        k = np.flatnonzero(reach)[int(np.argmin(dist[nodes[reach]]))]
+        # The cell that is shortest to reach *and* then to the goal: on the line toward it, not the near rim.
+        to_goal = np.hypot(*(centres[reach] - np.asarray(goal_xy, float)[:2]).T)
+        k = np.flatnonzero(reach)[int(np.argmin(dist[nodes[reach]] + to_goal))]
         node = int(nodes[k])
         chain = [node]
         while chain[-1] != start and pred[chain[-1]] >= 0:
@@ -161,6 +170,18 @@ class Planner:
         return not np.any(blocked[ij[ok, 0], ij[ok, 1]])
 
     # -- targets --------------------------------------------------------------------------
+    def goal_of(self, s: MapSource, pose) -> np.ndarray:
+        """Where to drive for a source: its estimate, or, while its range is unknown (1-sigma over
+        ``probe_sigma_m``: heard from one place, near the horizon), ``probe_distance_m`` along its bearing
+        (driving toward it steepens the elevation and gives the range)."""
+        cfg = self.config
+        xy = np.asarray(pose[:2], float)
+        v = s.position[:2] - xy
+        d = float(np.hypot(*v))
+        if s.horizontal_sigma_m <= cfg.probe_sigma_m or d <= cfg.probe_distance_m or d < 1e-9:
+            return s.position[:2].copy()
+        return xy + v * (cfg.probe_distance_m / d)
+
     def mark_unreachable(self, source_id: int, time: float) -> None:
         self._unreachable[source_id] = time
 
@@ -169,6 +190,8 @@ class Planner:
         """The source to approach and the path to it, or (None, None, why)."""
         cfg = self.config
         open_ = [s for s in sources if s.state not in (SourceState.FOUND, SourceState.REJECTED)
+                 and s.horizontal_sigma_m <= cfg.max_sigma_m
+                 and (s.cls is SourceClass.VICTIM or time - s.last_time <= cfg.stale_s)
                  and time - self._unreachable.get(s.id, -math.inf) >= cfg.unreachable_retry_s]
         victims = [s for s in open_ if s.cls is SourceClass.VICTIM]
         unknown = [s for s in open_ if s.cls is SourceClass.UNKNOWN]
@@ -182,7 +205,7 @@ class Planner:
         search = self.distances(grid, pose[:2])
         best = None
         for s in pool:
-            plan = self.plan(grid, pose[:2], s.position[:2], _search=search)
+            plan = self.plan(grid, pose[:2], self.goal_of(s, pose), _search=search)
             if plan is None:
                 self.mark_unreachable(s.id, time)
                 continue
@@ -211,18 +234,20 @@ class Planner:
         search = self.distances(grid, (x, y))
         best = None
         unvisited = (grid.visited == 0) & ~grid.blocked
-        r = int(round(0.6 / grid.resolution))
+        occupied = grid.occupied
+        r = int(round(1.0 / grid.resolution))   # judge a direction by the floor within 1 m of its goal
         for k in range(cfg.explore_headings):
             a = 2 * math.pi * k / cfg.explore_headings
             goal = np.array([x + cfg.explore_distance_m * math.cos(a), y + cfg.explore_distance_m * math.sin(a)])
             ij = grid.cell(goal)
             if not grid.inside(ij) or grid.blocked[ij]:
                 continue
-            win = unvisited[max(0, ij[0] - r):ij[0] + r + 1, max(0, ij[1] - r):ij[1] + r + 1]
-            score = float(win.mean())
+            box = (slice(max(0, ij[0] - r), ij[0] + r + 1), slice(max(0, ij[1] - r), ij[1] + r + 1))
+            # Unvisited floor draws; known obstacles there (walls met before) push away.
+            score = float(unvisited[box].mean()) - 3.0 * float(occupied[box].mean())
             for p in avoid:   # away from found victims and interferers: their sound masks fainter sources
                 d = math.hypot(goal[0] - p[0], goal[1] - p[1]) - math.hypot(x - p[0], y - p[1])
-                score += 0.3 * float(np.clip(d / cfg.explore_distance_m, -1, 1))
+                score += 0.5 * float(np.clip(d / cfg.explore_distance_m, -1, 1))
             plan = self.plan(grid, (x, y), goal, stop_radius=0.2, _search=search)
             if plan is None or plan.length > 2.0 * cfg.explore_distance_m:
                 continue

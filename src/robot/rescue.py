@@ -113,8 +113,12 @@ class RescueConfig:
     found_distance_m: float = 0.45         # criterion 3: map estimate this close (success radius in the
     #                                        shipped scenarios is 0.75 m: margin for a 0.3 m estimate error)
     found_sigma_m: float = 0.3             # ... and its horizontal 1-sigma below this
+    supporting_elevation_deg: float = 10.0  # ... and heard now this far below horizontal (a mouth at 0.1 m within
+    #                                        1.1 m of a 0.3 m high array)
     bump_found_range_m: float = 0.8        # criterion 4: bump while driving at a target estimated this close
     bump_ahead_deg: float = 35.0           # ... and this close to the direction of motion
+    max_contacts_per_target: int = 3       # contacts while pursuing one source before it is set aside a while
+    machine_radius_m: float = 1.0          # within this of a rejected interferer, only a voice declares a victim
     reject_after_listens: int = 4          # listens of an interferer from close up before it is rejected (a caller
     #                                        calls in ~40 % of 1 s listens in the shipped scenarios: 4 silent ones
     #                                        in a row happen to 13 % of callers, who stay on the map as unknown)
@@ -122,6 +126,7 @@ class RescueConfig:
     # moving
     step_m: float = 0.6                    # longest move between two listens
     min_step_m: float = 0.1
+    baseline_step_m: float = 0.4           # sideways step to triangulate a source known along one line only
     explore_after_silent: int = 3          # silent listens with nothing mapped before exploring
     fatal_faults: tuple[str, ...] = ("encoder_error",)  # drive faults that end the mission
 
@@ -142,8 +147,9 @@ class RescueConfig:
             raise ValueError(f"RescueConfig.voice_threshold: expected 0..1, got {self.voice_threshold}")
         if self.min_step_m > self.step_m:
             raise ValueError(f"RescueConfig.min_step_m: expected <= step_m = {self.step_m}, got {self.min_step_m}")
-        if self.explore_after_silent < 1:
-            raise ValueError("RescueConfig.explore_after_silent: expected >= 1")
+        for name in ("explore_after_silent", "max_contacts_per_target", "reject_after_listens"):
+            if getattr(self, name) < 1:
+                raise ValueError(f"RescueConfig.{name}: expected an integer >= 1, got {getattr(self, name)}")
         if self.max_victims is not None and self.max_victims < 1:
             raise ValueError(f"RescueConfig.max_victims: expected None or >= 1, got {self.max_victims}")
 
@@ -187,14 +193,15 @@ class RescueBehaviour:
 
     ``localizer``: anything with ``locate(samples) -> result`` whose ``result.detections`` have ``azimuth``,
     ``elevation`` (rad, array frame), ``power`` and optionally ``direction``, ``level_db``. Its ``geometry``
-    (if present; else give ``geometry``) is used to beamform toward each detection for the VAD.
+    (if present; else give ``geometry``) is used to beamform toward each detection for the VAD; ``speech``
+    replaces the VAD (``robot.listening.Listener``).
     """
 
     def __init__(self, audio: AudioSource, drive: DriveBase, clock: Clock, localizer,
                  config: RescueConfig = RescueConfig(), *, motion: MotionConfig = MotionConfig(),
                  sound_map: SoundMapConfig = SoundMapConfig(), planner: PlannerConfig = PlannerConfig(),
                  occupancy: OccupancyConfig = OccupancyConfig(), params: OmniDriveParams = OmniDriveParams(),
-                 start_pose=(0.0, 0.0, 0.0), geometry=None) -> None:
+                 start_pose=(0.0, 0.0, 0.0), geometry=None, speech=None) -> None:
         self.audio, self.drive, self.clock, self.localizer, self.config = audio, drive, clock, localizer, config
         geometry = geometry if geometry is not None else getattr(localizer, "geometry", None)
         mics = None if geometry is None else np.asarray(getattr(geometry, "positions", geometry), float)
@@ -206,7 +213,7 @@ class RescueBehaviour:
             raise ValueError(f"localizer fs is {loc_fs} Hz but the audio source delivers {audio.sample_rate} Hz")
         self.odometry = Odometry(params, start_pose)
         self.motion = Motion(drive, clock, self.odometry, motion, fatal=self._check_faults)
-        self.listener = Listener(audio, clock, localizer, mics, config.voice_threshold)
+        self.listener = Listener(audio, clock, localizer, mics, config.voice_threshold, speech)
         self.map = SoundMap(dataclasses.replace(sound_map, array_height_m=config.array_height_m))
         self.grid = OccupancyGrid(occupancy, origin=np.asarray(start_pose, float)[:2])
         self.planner = Planner(planner)
@@ -217,6 +224,8 @@ class RescueBehaviour:
         self.plan: Plan | None = None
         self._silent = 0
         self._close_listens: dict[int, int] = {}
+        self._target_contacts: dict[int, int] = {}
+        self._side = 1.0                          # alternating side of baseline steps
         self._faults_seen: tuple[str, ...] = ()
         self._step_events: list[RescueEvent] = []
         self._odo_started = False
@@ -348,7 +357,10 @@ class RescueBehaviour:
                 continue
             crit = None
             ev = heard_by.get(sid)
-            if ev is not None:
+            # Beside a machine checked from close up only a voice makes a victim: its reflections off nearby
+            # rubble arrive steep and loud (dense_pump: a -41 deg bearing 0.4 m from the pump).
+            near_machine = s.cls is not SourceClass.VICTIM and self._near_machine(s)
+            if ev is not None and s.n_inliers >= 2 and not near_machine:
                 steep = -math.degrees(ev.elevation)
                 faintest = min((r.level_db for r in s.history), default=ev.level_db)
                 rise = ev.level_db - faintest
@@ -358,18 +370,29 @@ class RescueBehaviour:
                     crit = (f"elevation {-steep:.0f} deg (< -{cfg.corroborated_elevation_deg:g}) and level rose "
                             f"{rise:.1f} dB (>= {cfg.level_rise_db:g})")
             d = s.distance_to(xy)
+            # The map alone is not enough (a wrong triangulation would declare empty floor): the bearing heard
+            # now must point down as a mouth on the floor within reach does (elevation supporting).
             if crit is None and d <= cfg.found_distance_m and s.horizontal_sigma_m <= cfg.found_sigma_m \
-                    and s.n_inliers >= 3:
+                    and s.n_inliers >= 3 and s.triangulated and not near_machine \
+                    and ev is not None and -math.degrees(ev.elevation) >= cfg.supporting_elevation_deg:
                 crit = (f"map estimate {d:.2f} m away (<= {cfg.found_distance_m:g}), +- "
                         f"{s.horizontal_sigma_m:.2f} m from {s.n_inliers} listens")
-            if crit is not None and not self._approachable(s):
-                # Close enough to hear a voice if it had one; a caller pauses, so a few listens first.
-                n = self._close_listens[s.id] = self._close_listens.get(s.id, 0) + (ev is not None)
+            reached = d <= cfg.found_distance_m and s.horizontal_sigma_m <= cfg.found_sigma_m and s.triangulated
+            if crit is None and reached and not self._approachable(s):
+                crit = f"map estimate {d:.2f} m away, +- {s.horizontal_sigma_m:.2f} m"   # a machine: no elevation cue
+            if crit is None:
+                continue
+            voiced = any(r.voice_probability >= 0.5 for r in s.history)
+            if not voiced and s.cls is not SourceClass.VICTIM:
+                # Close enough to hear a voice if it had one; a caller pauses, so a few listens first: each
+                # listen that hears it without speech lowers P(victim), a pause adds nothing.
+                n = self._close_listens[s.id] = self._close_listens.get(s.id, 0) + 1
                 if n < cfg.reject_after_listens:
                     self._emit(Decision.NO_TARGET, f"at source #{s.id} ({crit}), no voice yet "
                                                    f"(P(victim) {s.victim_probability:.2f}): listen again "
                                                    f"({n}/{cfg.reject_after_listens})", {"source": s.id})
                     return True
+            if not self._approachable(s):
                 # Still no voice: a machine. Never a target again.
                 self.map.set_state(s.id, SourceState.REJECTED, self.clock.now())
                 if self.target == s.id:
@@ -378,10 +401,13 @@ class RescueBehaviour:
                                               f"(P(victim) {s.victim_probability:.2f}): an interferer, not a victim",
                            {"source": s.id, "position": s.position.tolist()})
                 continue
-            if crit is not None:
-                self._declare_found(s, crit)
-                return True
+            self._declare_found(s, crit)
+            return True
         return False
+
+    def _near_machine(self, s: MapSource) -> bool:
+        return any(o.id != s.id and o.state is SourceState.REJECTED
+                   and o.distance_to(s.position) <= self.config.machine_radius_m for o in self.map.sources)
 
     def _approachable(self, s: MapSource) -> bool:
         """May be declared a found victim: classified victim, or (unless ``require_voice``) not yet classified."""
@@ -450,7 +476,17 @@ class RescueBehaviour:
             if left <= 1e-3:
                 break
         total = cfg.step_m - left
-        if total < 0.02:
+        if total < 0.02 and target is not None and target.horizontal_sigma_m > cfg.found_sigma_m:
+            # At the goal but the source's range is still open (heard only along one line): step across the
+            # bearing for a baseline that triangulates it.
+            bearing = math.atan2(target.position[1] - y, target.position[0] - x)
+            side = self._side
+            self._side = -self._side
+            legs = [np.array([x, y]) + cfg.baseline_step_m * np.array([math.cos(bearing + side * math.pi / 2),
+                                                                         math.sin(bearing + side * math.pi / 2)])]
+            total = cfg.baseline_step_m
+            prefix = f"source #{target.id} +- {target.horizontal_sigma_m:.2f} m: step across its bearing for a baseline"
+        elif total < 0.02:
             self._emit(Decision.NO_TARGET, f"{prefix or 'at the goal'}: nothing to drive")
             if target is not None:
                 self.planner.mark_unreachable(target.id, self.clock.now())
@@ -482,12 +518,19 @@ class RescueBehaviour:
             d = s.distance_to((x, y))
             off = abs(wrap_angle(math.atan2(s.position[1] - y, s.position[0] - x) - b.heading))
             if d <= cfg.bump_found_range_m and off <= math.radians(cfg.bump_ahead_deg) \
-                    and s.state is not SourceState.FOUND and self._approachable(s):
+                    and s.state is not SourceState.FOUND and self._approachable(s) \
+                    and (s.cls is SourceClass.VICTIM or not self._near_machine(s)):
                 self._declare_found(s, f"bumped into it while approaching (estimate {d:.2f} m ahead, "
                                        f"{math.degrees(off):.0f} deg off the motion)")
                 if not self.done:
                     self._back_off(b.heading, "clear the bumper after touching the victim")
                 return
+        if target is not None:
+            n = self._target_contacts[target.id] = self._target_contacts.get(target.id, 0) + 1
+            if n >= cfg.max_contacts_per_target:
+                # Walls the robot cannot see: a mirror image beyond a wall draws it along the wall forever.
+                self.planner.mark_unreachable(target.id, self.clock.now())
+                self._target_contacts[target.id] = 0
         self._recover(b, "while moving")
 
     def _recover(self, b: Blocked, when: str) -> None:

@@ -93,6 +93,7 @@ class SoundMapConfig:
     interferer_probability: float = 0.15   # (0.15: seven listens without speech from the prior)
     max_log_odds: float = 6.0              # |sum of listen log-odds| cap
     max_range_m: float = 15.0              # no source farther than this from where it was heard
+    min_range_m: float = 0.2               # ... nor nearer (horizontally) than the bumper ring (0.16 m)
     seed: int = 0                          # RANSAC sampling
 
     def __post_init__(self) -> None:
@@ -114,7 +115,7 @@ class SoundMapConfig:
         need(0 <= self.interferer_probability <= self.victim_probability <= 1, "victim_probability",
              f"in [interferer_probability ({self.interferer_probability}), 1]")
         need(self.max_log_odds > 0, "max_log_odds", "> 0")
-        need(self.max_range_m > 0, "max_range_m", "> 0 m")
+        need(0 < self.min_range_m < self.max_range_m, "min_range_m", "in (0, max_range_m) m")
 
 
 @dataclass(frozen=True)
@@ -148,6 +149,12 @@ class MapSource:
     max_level_db: float
     history: tuple[Listen, ...]
     found_time: float | None = None
+    baseline_m: float = 0.0        # largest horizontal distance between two listening poses of its inliers
+
+    @property
+    def triangulated(self) -> bool:
+        """Heard from poses at least 0.3 m apart (the range comes from geometry, not only the height prior)."""
+        return self.baseline_m >= 0.3
 
     @property
     def horizontal_sigma_m(self) -> float:
@@ -284,6 +291,13 @@ def _refine(o: np.ndarray, d: np.ndarray, p0: np.ndarray, cfg: SoundMapConfig, i
         if norm > 1.0:
             step *= 1.0 / norm
         p = p + step
+        # A source is not inside the robot: keep it min_range_m (horizontally) from every listening pose.
+        v = p[None, :2] - o[:, :2]
+        rho = np.hypot(v[:, 0], v[:, 1])
+        k = int(np.argmin(rho))
+        if rho[k] < cfg.min_range_m:
+            u = v[k] / rho[k] if rho[k] > 1e-9 else d[k, :2] / max(float(np.hypot(*d[k, :2])), 1e-9)
+            p[:2] = o[k, :2] + cfg.min_range_m * u
         if norm < 1e-4:
             break
     cov = np.linalg.inv(a)
@@ -501,6 +515,9 @@ class SoundMap:
         else:
             cls = SourceClass.UNKNOWN
         times = [r.time for r in s.rays]
+        org = np.array([r.origin[:2] for r in inl]).reshape(-1, 2)
+        baseline = float(np.max(np.linalg.norm(org[:, None] - org[None], axis=-1))) if len(org) > 1 else 0.0
         return MapSource(s.id, s.position.copy(), s.covariance.copy(), pv, cls, s.state, len(s.rays), len(inl),
                          min(times, default=s.found_time or 0.0), max(times, default=s.found_time or 0.0),
-                         s.rays[-1].level_db if s.rays else -math.inf, s.max_level_db, tuple(s.rays), s.found_time)
+                         s.rays[-1].level_db if s.rays else -math.inf, s.max_level_db, tuple(s.rays), s.found_time,
+                         baseline)
