@@ -322,14 +322,24 @@ class RescueRun:
                 self.found[i] = entry
                 if self.logger.enabled:
                     order = sorted(self.found)
-                    self.logger.found(ev.time, np.array([self.sources[k].position for k in order]),
-                                      [self.sources[k].name for k in order])
+                    h = [ev.data.get("height", 0.1)] * len(order)
+                    est = np.array([[*self.found[k]["estimate"], hk] for k, hk in zip(order, h)], float)
+                    self.logger.found(ev.time, est, np.array([self.sources[k].position for k in order]),
+                                      [f"{self.sources[k].name} (off {self.found[k]['estimate_error_m']:.2f} m)"
+                                       for k in order])
             else:
                 i = int(np.argmin(dists)) if dists else None
                 entry.update({"nearest_victim": self.sources[i].name if i is not None else None,
                               "nearest_distance_m": _r(dists[i]) if i is not None else None,
                               "late": ev.time > sc.time_limit_s})
                 self.false_positives.append(entry)
+
+    def _log_map(self) -> None:
+        """The behaviour's own picture: sound map, plan, learned obstacles (odometry frame = world frame here)."""
+        b, t = self.behaviour, self.robot.time
+        self.logger.sound_map(t, b.map.sources)
+        self.logger.plan(t, b.pose[:2], None if b.plan is None else b.plan.waypoints)
+        self.logger.obstacles(t, b.grid.obstacle_points(), b.grid.resolution)
 
     # -- main loop ------------------------------------------------------------------------
     def run(self, progress: bool = False) -> dict[str, Any]:
@@ -356,6 +366,8 @@ class RescueRun:
                 if self.clock.now() >= sc.time_limit_s:
                     break
                 self._handle_events(self.behaviour.step())
+                if self.logger.enabled:
+                    self._log_map()
                 if bar is not None:
                     bar.n = min(self.clock.now(), sc.time_limit_s)
                     bar.set_postfix_str(f"found {len(self.found)}/{self.n_victims}")
