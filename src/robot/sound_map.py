@@ -221,11 +221,13 @@ def triangulate(origins, directions, cfg: SoundMapConfig = SoundMapConfig(),
     hyp = [_on_prior_height(o, d, cfg)]
     n = len(o)
     if n >= 2:
-        k = min(cfg.ransac_hypotheses, n * (n - 1) // 2)
-        i = rng.integers(0, n, size=4 * k)
-        j = rng.integers(0, n, size=4 * k)
-        ok = i != j
-        pairs = np.unique(np.sort(np.stack([i[ok], j[ok]], 1), axis=1), axis=0)[:k]
+        if n * (n - 1) // 2 <= cfg.ransac_hypotheses:      # few rays: every pair
+            pairs = np.stack(np.triu_indices(n, 1), axis=1)
+        else:
+            i = rng.integers(0, n, size=4 * cfg.ransac_hypotheses)
+            j = rng.integers(0, n, size=4 * cfg.ransac_hypotheses)
+            ok = i != j
+            pairs = np.unique(np.sort(np.stack([i[ok], j[ok]], 1), axis=1), axis=0)[:cfg.ransac_hypotheses]
         hyp.append(_closest_points(o[pairs[:, 0]], d[pairs[:, 0]], o[pairs[:, 1]], d[pairs[:, 1]], cfg))
     cand = np.concatenate(hyp)
     cand = cand[np.all(np.isfinite(cand), axis=1)]
@@ -472,7 +474,7 @@ class SoundMap:
                     keep.max_level_db = max(keep.max_level_db, drop.max_level_db)
                     if keep.state is not SourceState.FOUND and drop.state is SourceState.APPROACHING:
                         keep.state = SourceState.APPROACHING
-                    if keep.rays and keep.state is not SourceState.FOUND:
+                    if keep.rays:
                         self._refit(keep)
                     self._merged_into[drop.id] = keep.id
                     self._sources.remove(drop)
