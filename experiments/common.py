@@ -33,7 +33,8 @@ from ssl_sim.acoustics import (AcousticConfig, AcousticSimulator, AmbientNoise, 
                                RobotPose, SoundSource, continuous_voice, point_at)
 from ssl_sim.world import Room, World  # noqa: E402
 
-RESULTS = Path(__file__).resolve().parent / "results"
+RESULTS = Path(__file__).resolve().parent / "results"           # the committed full results
+QUICK_RESULTS = Path(__file__).resolve().parent / "out" / "quick"  # scratch (git-ignored) for --quick runs
 SPEAKERS = ("male", "female", "male_low", "female_high", "child", "male_high", "female_low", "elderly_male")
 
 
@@ -249,13 +250,16 @@ class Timer:
 
 
 __all__ = ["Lab", "Truth", "build_sim", "record", "localizer", "match", "score", "wrap_deg", "write_csv", "read_csv",
-           "md_table", "Outcome", "Timer", "RESULTS", "LOCALIZER_NOTE", "POOLED_NOTE", "pooled_localize"]
+           "md_table", "Outcome", "Timer", "RESULTS", "QUICK_RESULTS", "LOCALIZER_NOTE", "POOLED_NOTE", "pooled_localize"]
 
 
 def script_main(run, doc: str | None) -> None:
     """Command line of one experiment script: ``[--quick] [--out DIR]``, prints its markdown."""
     ap = argparse.ArgumentParser(description=doc)
-    ap.add_argument("--quick", action="store_true")
-    ap.add_argument("--out", type=Path, default=RESULTS)
+    ap.add_argument("--quick", action="store_true", help=f"few trials, written to {QUICK_RESULTS} by default")
+    ap.add_argument("--out", type=Path, default=None, help=f"default {RESULTS} ({QUICK_RESULTS} with --quick)")
     a = ap.parse_args()
-    print(run(a.quick, a.out).markdown)
+    out = a.out or (QUICK_RESULTS if a.quick else RESULTS)
+    if a.quick and out.resolve() == RESULTS.resolve():
+        ap.error(f"--quick must not overwrite the committed full results in {RESULTS}")
+    print(run(a.quick, out).markdown)

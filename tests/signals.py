@@ -41,3 +41,23 @@ def point_source(mics: np.ndarray, position: np.ndarray, s: np.ndarray, fs: int)
     """Spherical wave from ``position`` (m): exact delays and 1/r amplitude."""
     r = np.linalg.norm(mics - position, axis=1)
     return delay_signals(s, r / C, fs) / r[:, None]
+
+
+def room_talker(mics: np.ndarray, direction: np.ndarray, seconds: float, fs: int, seed: int, rt60_s: float = 0.4,
+                snr_db: float = 20.0, distance_m: float = 1.5) -> np.ndarray:
+    """(n_mics, n) recording of a ``speech_like`` talker ``distance_m`` away along unit ``direction`` (array
+    frame) from an array with microphones ``mics`` (m, array frame) in a 6 x 5 x 3 m pyroomacoustics room of
+    ``rt60_s``; scaled to -20 dBFS rms, white sensor noise ``snr_db`` below that."""
+    import pyroomacoustics as pra
+
+    room_dim = np.array([6.0, 5.0, 3.0])
+    e_abs, max_order = pra.inverse_sabine(rt60_s, room_dim)
+    centre = np.array([2.6, 2.2, 1.2])
+    room = pra.ShoeBox(room_dim, fs=fs, materials=pra.Material(e_abs), max_order=min(max_order, 12))
+    n = int(seconds * fs)
+    room.add_source(centre + distance_m * np.asarray(direction), signal=speech_like(n, fs, seed=seed))
+    room.add_microphone_array((centre + mics).T)
+    room.simulate()
+    x = room.mic_array.signals[:, :n]
+    x = 0.1 * x / np.sqrt(np.mean(x**2))
+    return x + np.random.default_rng(seed).standard_normal(x.shape) * 0.1 / 10 ** (snr_db / 20)

@@ -287,3 +287,28 @@ def test_capture_tracks_a_drifting_offset():
     start = cap.merger.cursor - 4000
     np.testing.assert_array_equal(block.samples, (truth[:, start:start + 4000] * 32767).astype(np.int16))
     cap.close()
+
+
+def test_capture_detects_and_corrects_a_5_ms_slip():
+    # Device 1's stream slips by 80 samples (5 ms, beyond the +-2 ms drift search) 2 s in: the tracker
+    # must not apply a wrong nearby offset but find the new one (re-calibration), count and log it.
+    truth = 0.3 * _plane_wave(_unit(-40, 20), 5 * FS, seed=8) / 4
+    before, after = _devices(truth, 200), _devices(truth, 280)
+    at = 2 * FS  # device-1 index of the slip
+    dev = [before[0], np.concatenate([before[1][:, :at], after[1][:, at:]], axis=1)]
+    sd = _FakeSD(dev, pace=0.15)  # delivered as a live device would, 0.15 s per s of audio
+    cap = ArrayCapture((1, 2), FS, positions=G.positions, blocksize=512, track_every_s=0.5, backend=sd)
+    cap.merger.set_offset(200)
+    seen = []
+    while cap.merger.cursor < 4 * FS:
+        cap.read(1024)
+        seen.append((cap.merger.cursor, cap.merger.offset))
+    assert {o for _, o in seen} <= {200, 280}                 # never a wrong offset in between
+    fixed = min(c for c, o in seen if o == 280)
+    assert fixed + 280 >= at - 1024                           # not before the slip happened ...
+    assert fixed - (at - 200) <= 1.5 * FS                     # ... and within 1.5 s of audio after it
+    assert cap.merger.slips == 1
+    block = cap.read(4000)
+    start = cap.merger.cursor - 4000
+    np.testing.assert_array_equal(block.samples, (truth[:, start:start + 4000] * 32767).astype(np.int16))
+    cap.close()

@@ -13,10 +13,10 @@ from __future__ import annotations
 import argparse
 import json
 import logging
+import math
 import sys
-import typing
-from dataclasses import fields, replace
 
+from robot.config_values import field_values
 from robot.hal import Clock, ManualClock, WallClock
 from robot.rescue import RescueBehaviour, RescueConfig, RescueEvent
 
@@ -55,33 +55,34 @@ def _parser() -> argparse.ArgumentParser:
 
 
 def _rescue_config(args) -> RescueConfig:
-    cfg = RescueConfig(max_victims=args.max_victims)
-    types = typing.get_type_hints(RescueConfig)
-    known = {f.name for f in fields(RescueConfig)}
-    changes = {}
+    values = {}
     for item in args.set:
         name, sep, text = item.partition("=")
-        name = name.strip()
-        if not sep or name not in known:
-            raise ValueError(f"--set {item!r}: expected FIELD=VALUE with FIELD one of {sorted(known)}")
-        t = types[name]
-        try:
-            if t is bool:
-                if text.lower() not in ("true", "false", "1", "0", "yes", "no"):
-                    raise ValueError(text)
-                value = text.lower() in ("true", "1", "yes")
-            elif t in (int, float):
-                value = t(text)
-            elif text.lower() == "none":
-                value = None
-            elif "int" in str(t):
-                value = int(text)
-            else:
-                value = tuple(s.strip() for s in text.split(",") if s.strip())
-        except ValueError:
-            raise ValueError(f"--set {name}={text!r}: expected a value of type {t}") from None
-        changes[name] = value
-    return replace(cfg, **changes)
+        if not sep:
+            raise ValueError(f"--set {item!r}: expected FIELD=VALUE, e.g. --set listen_s=2.0")
+        values[name.strip()] = text
+    try:
+        changes = field_values(RescueConfig, values, "--set", text=True, sep=" ")
+        return RescueConfig(**{"max_victims": args.max_victims, **changes})
+    except (ValueError, TypeError) as exc:
+        msg = str(exc)
+        raise ValueError(msg if msg.startswith("--set") else f"--set: {msg}") from None
+
+
+def _check_options(args) -> None:
+    """Numbers the parser accepts but a mission cannot use; the error names the option."""
+    if not (math.isfinite(args.max_time) and args.max_time > 0):
+        raise ValueError(f"--max-time: expected a duration > 0 s, got {args.max_time}")
+    if args.sources < 1:
+        raise ValueError(f"--sources: expected an integer >= 1, got {args.sources}")
+    if not (math.isfinite(args.rel_threshold) and 0 <= args.rel_threshold <= 1):
+        raise ValueError(f"--rel-threshold: expected a fraction in [0, 1], got {args.rel_threshold}")
+    if not (math.isfinite(args.calibrate) and args.calibrate >= 0):
+        raise ValueError(f"--calibrate: expected seconds >= 0, got {args.calibrate}")
+    if args.fs <= 0:
+        raise ValueError(f"--fs: expected a sample rate > 0 Hz, got {args.fs}")
+    if args.max_victims is not None and args.max_victims < 1:
+        raise ValueError(f"--max-victims: expected an integer >= 1, got {args.max_victims}")
 
 
 def _open_drive(args, clock: Clock):
@@ -120,6 +121,28 @@ def _open_audio(args, clock: Clock, geometry, out):
             state = "applied" if est.confident else "NOT applied (not confident: make a louder sound)"
             print(f"{PROG}: device offset: {est} - {state}", file=out, flush=True)
     return cap
+
+
+def _monitored(args, audio, geometry, localizer, out):
+    """``audio`` watched by the microphone health monitor: faults printed, faulty channels not localized."""
+    from robot.hardware.audio import parse_channel_map
+    from robot.monitored_audio import MonitoredAudio
+    from ssl_core.health import HealthConfig, MicHealth
+
+    cmap = parse_channel_map(args.channel_map)
+    devices = [d for d, _ in cmap] if len(cmap) == geometry.n_mics else None
+
+    def report(time: float, new, cleared) -> None:
+        for state, faults in (("fault", new), ("cleared", cleared)):
+            for f in faults:
+                if args.json:
+                    print(json.dumps({"time": round(time, 3), "microphone": state, "kind": f.kind,
+                                      "channels": list(f.channels), "detail": f.detail}), file=out, flush=True)
+                else:
+                    print(f"{PROG}: microphone {state} at {time:.1f} s: {f}", file=out, flush=True)
+
+    monitor = MicHealth(geometry, HealthConfig(fs=audio.sample_rate), devices=devices)
+    return MonitoredAudio(audio, monitor, localizer, on_change=report)
 
 
 class _MissionClock(WallClock):
@@ -178,15 +201,20 @@ def main(argv: list[str] | None = None, out=None) -> int:
     from ssl_core.geometry import get_array
     from ssl_core.localizer import Localizer, LocalizerConfig
 
+    try:
+        _check_options(args)
+        config = _rescue_config(args)
+    except ValueError as exc:
+        return fail(str(exc))
     drive = audio = None
     try:
-        config = _rescue_config(args)
         geometry = get_array(args.array)
         clock: Clock = ManualClock() if args.replay and not args.realtime else _MissionClock()
         drive = _open_drive(args, clock)
         audio = _open_audio(args, clock, geometry, out)
-        localizer = Localizer(geometry, LocalizerConfig(fs=audio.sample_rate, n_sources=max(1, args.sources),
+        localizer = Localizer(geometry, LocalizerConfig(fs=audio.sample_rate, n_sources=args.sources,
                                                         rel_threshold=args.rel_threshold))
+        audio = _monitored(args, audio, geometry, localizer, out)
     except (ValueError, FileNotFoundError, ImportError, OSError, RuntimeError) as exc:
         for dev in (drive, audio):
             if dev is not None:

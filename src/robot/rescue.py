@@ -45,6 +45,7 @@ from robot.motion import Blocked, Motion, MotionConfig
 from robot.occupancy import OccupancyConfig, OccupancyGrid
 from robot.odometry import Odometry, wrap_angle
 from robot.planner import Plan, Planner, PlannerConfig
+from robot.protocol import FAULT_NAMES
 from robot.sound_map import MapSource, SoundMap, SoundMapConfig, SourceClass, SourceState
 
 log = logging.getLogger(__name__)
@@ -147,6 +148,9 @@ class RescueConfig:
             raise ValueError(f"RescueConfig.voice_threshold: expected 0..1, got {self.voice_threshold}")
         if self.min_step_m > self.step_m:
             raise ValueError(f"RescueConfig.min_step_m: expected <= step_m = {self.step_m}, got {self.min_step_m}")
+        if not (isinstance(self.fatal_faults, tuple) and set(self.fatal_faults) <= set(FAULT_NAMES.values())):
+            raise ValueError(f"RescueConfig.fatal_faults: expected drive fault names out of "
+                             f"{sorted(FAULT_NAMES.values())} (an empty list for none), got {self.fatal_faults!r}")
         for name in ("explore_after_silent", "max_contacts_per_target", "reject_after_listens"):
             if getattr(self, name) < 1:
                 raise ValueError(f"RescueConfig.{name}: expected an integer >= 1, got {getattr(self, name)}")

@@ -258,9 +258,21 @@ class Localizer:
             level = 10 * np.log10(ms / _FULL_SCALE_SINE_MS)
         return level >= self.config.min_level_dbfs
 
+    _pair_weights: np.ndarray | None = None  # None: every pair counts (see exclude_channels)
+
+    def exclude_channels(self, channels: list[int] | tuple[int, ...]) -> None:
+        """Leave every pair of ``channels`` (faulty microphones, e.g. ``ssl_core.health``'s ``excluded``) out
+        of the SRP sum from the next window on; the others are scaled so that 1 stays perfectly coherent."""
+        bad = np.isin(self.pairs, np.asarray(channels, int)).any(axis=1)
+        if bad.all():
+            raise ValueError(f"exclude_channels: excluding {list(channels)} leaves no microphone pair")
+        self._pair_weights = None if not bad.any() else np.where(bad, 0.0, len(bad) / (~bad).sum())
+
     def _gcc(self, spec: np.ndarray, weights: np.ndarray | None = None) -> np.ndarray:
         """Frame-averaged GCC-PHAT (pairs, lags) of band spectra (channels, frames, bins)."""
         cross = summed_phat_cross_spectra(spec, self.pairs, weights)
+        if self._pair_weights is not None:
+            cross = cross * self._pair_weights[:, None].astype(cross.real.dtype)
         return self._lag_steering(cross / max(spec.shape[1], 1))
 
     def _new_floor(self) -> NoiseFloor | None:

@@ -18,16 +18,22 @@ from ssl_sim.scenario import ScenarioError, load_scenario, scenario_names
 
 
 def _run(args: argparse.Namespace) -> int:
-    from ssl_sim.runner import format_summary, run_scenario
+    from ssl_sim.runner import check_output_dir, format_summary, run_scenario
+    from ssl_sim.viz import parse_rerun_target
 
     sc = load_scenario(args.scenario)
     seed = args.seed if args.seed is not None else sc.seed
     out = Path(args.out) if args.out else Path("out") / "runs" / f"{sc.name}_seed{seed}"
+    # Fail now, not after the whole simulation.
+    check_output_dir(out, "--out")
+    if args.rerun:
+        mode, arg = parse_rerun_target(args.rerun)
+        if mode == "save":
+            check_output_dir(Path(arg).parent, "--rerun save:")
     result = run_scenario(sc, seed=args.seed, time_limit_s=args.time_limit, rerun=args.rerun, out_dir=out,
                           progress=not args.quiet)
     print(format_summary(result))
-    print(f"wrote {out / 'results.json'}" + (f" and {args.rerun[5:]}" if args.rerun and args.rerun.startswith("save:")
-                                             else ""))
+    print(f"wrote {out / 'results.json'}" + (f" and {result['rerun_file']}" if result.get("rerun_file") else ""))
     if args.json:
         print(json.dumps({k: result[k] for k in ("scenario", "seed", "n_found", "n_victims", "sim_time_s",
                                                   "path_length_m", "collisions", "spl")}))
@@ -35,9 +41,11 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _sweep(args: argparse.Namespace) -> int:
+    from ssl_sim.runner import check_output_dir
     from ssl_sim.sweep import markdown_table, parse_seeds, run_sweep, summarize, write_tables
 
     seeds = parse_seeds(args.seeds)
+    check_output_dir(args.out, "--out")  # now, not after the whole sweep
     rows = run_sweep(args.scenarios, seeds, cluster=args.cluster, workers=args.workers,
                      time_limit_s=args.time_limit, progress=not args.quiet)
     tables = summarize(rows)
@@ -96,6 +104,9 @@ def main(argv: list[str] | None = None) -> int:
     except (ScenarioError, ValueError, FileNotFoundError) as exc:
         print(f"ssl-rescue: error: {exc}", file=sys.stderr)
         return 2
+    except KeyboardInterrupt:
+        print("ssl-rescue: interrupted", file=sys.stderr)
+        return 130
 
 
 if __name__ == "__main__":

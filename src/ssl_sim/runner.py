@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import json
 import math
+import tempfile
 import time
 from dataclasses import asdict
 from pathlib import Path
@@ -38,8 +39,10 @@ from scipy import sparse
 from scipy.sparse.csgraph import dijkstra
 
 from robot.odometry import wrap_angle
+from robot.monitored_audio import MonitoredAudio
 from robot.rescue import Decision, RescueBehaviour, RescueEvent
 from ssl_core.geometry import cube8
+from ssl_core.health import HealthConfig, MicHealth
 from ssl_core.localizer import Localizer
 from ssl_sim.acoustics import AcousticSimulator
 from ssl_sim.backends import SimAudioSource, array_frame_directions
@@ -181,8 +184,12 @@ class RescueRun:
         self.audio = SimAudioSource(robot, acoustics, on_block=self._on_block)
         self.drive = SimDriveBase(robot)
         self.clock = _TracingClock(robot, self._on_tick)
-        self.localizer = _RecordingLocalizer(Localizer(cube8(), sc.localizer), self._on_result)
-        self.behaviour = RescueBehaviour(self.audio, self.drive, self.clock, self.localizer, sc.behaviour,
+        localizer = Localizer(cube8(), sc.localizer)
+        self.localizer = _RecordingLocalizer(localizer, self._on_result)
+        # The robot's microphone health monitor, as on the real robot (faults go to rerun and results).
+        self.mic_health = MonitoredAudio(self.audio, MicHealth(cube8(), HealthConfig(fs=sc.localizer.fs)),
+                                         localizer, on_change=self._on_mic_faults)
+        self.behaviour = RescueBehaviour(self.mic_health, self.drive, self.clock, self.localizer, sc.behaviour,
                                          params=robot.params, start_pose=world.robot_start, **sc.stage_configs())
         self.paths = FreeSpacePaths(world)
         # truth bookkeeping
@@ -234,6 +241,11 @@ class RescueRun:
                 self.collisions.append({"time_s": _r(now, 2), "position": [_r(v) for v in touching.position],
                                         "obstacle": touching.obstacle, "geom": touching.world_geom})
             self._last_contact_t = now
+
+    def _on_mic_faults(self, t: float, new, cleared) -> None:
+        for state, faults in (("microphone fault", new), ("microphone fault cleared", cleared)):
+            for f in faults:
+                self.logger.event(t, "health", f"{state}: {f}", "WARN" if f in new else "INFO")
 
     def _on_block(self, block, mics) -> None:
         self._last_block = (int(round(block.timestamp * block.sample_rate)), block.samples.shape[1])
@@ -342,7 +354,9 @@ class RescueRun:
         self.logger.obstacles(t, b.grid.obstacle_points(), b.grid.resolution)
 
     # -- main loop ------------------------------------------------------------------------
-    def run(self, progress: bool = False) -> dict[str, Any]:
+    def run(self, progress: bool = False, close_logger: bool = True) -> dict[str, Any]:
+        """Run to the end; ``close_logger=False`` leaves the (possibly slow) viewer flush to the caller,
+        e.g. to write the results first."""
         sc = self.scenario
         self.logger.start(self.world, self.sources, self.robot.config,
                           f"{sc.name} (seed {self.seed}): {sc.description}")
@@ -378,7 +392,8 @@ class RescueRun:
         loop_s = time.perf_counter() - t_wall
         if self.logger.enabled:
             self.logger.trail(self.robot.time, np.array([row[1:4] for row in self.trajectory]))
-            self.logger.close()
+            if close_logger:
+                self.logger.close()
         return self._results(end_reason, loop_s)
 
     def _results(self, end_reason: str, loop_s: float) -> dict[str, Any]:
@@ -438,6 +453,8 @@ class RescueRun:
             "angular_error_deg": {"all_detections": stats(errs), "strongest_detection": stats(first)},
             "listens": self.listens,
             "events": [str(e) for e in self.events],
+            "microphone_faults": [{"time_s": _r(t, 2), "state": state, "kind": f.kind, "channels": list(f.channels),
+                                   "detail": f.detail} for t, state, f in self.mic_health.history],
             "config": {"behaviour": asdict(sc.behaviour), "localizer": asdict(sc.localizer),
                        **{k: asdict(v) for k, v in sc.stage_configs().items()},
                        "acoustics": dict(sc.acoustics),
@@ -459,6 +476,23 @@ def _json_default(o):
     raise TypeError(f"not JSON serialisable: {type(o).__name__}")
 
 
+class OutputPathError(ValueError):
+    """An output location cannot be written."""
+
+
+def check_output_dir(path: str | Path, what: str = "out_dir") -> Path:
+    """Create directory ``path`` if needed and prove it writable now, before a long simulation;
+    raises :class:`OutputPathError` naming ``what`` (the option or argument)."""
+    p = Path(path)
+    try:
+        p.mkdir(parents=True, exist_ok=True)
+        with tempfile.NamedTemporaryFile(dir=p, prefix=".write-test-"):
+            pass
+    except OSError as exc:
+        raise OutputPathError(f"{what} {p}: cannot write there ({exc.strerror or exc})") from None
+    return p
+
+
 def write_results(result: dict, out_dir: str | Path, name: str = "results.json") -> Path:
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
@@ -471,17 +505,25 @@ def run_scenario(scenario: Scenario | str | Path, seed: int | None = None, *, ti
                  rerun: str | None = None, out_dir: str | Path | None = None, progress: bool = False) -> dict:
     """Run a scenario (object, shipped name or TOML path) and return its results dict.
 
-    ``rerun``: ``save:PATH`` / ``spawn`` / ``connect[:ADDR]`` (see ``ssl_sim.viz``), None = no logging.
-    ``out_dir``: also write ``results.json`` there."""
+    ``rerun``: ``save:PATH`` / ``spawn`` / ``connect[:ADDR]`` (see ``ssl_sim.viz``), None = no logging;
+    an unreachable viewer falls back to ``out_dir/rescue.rrd`` (or no logging) with a warning.
+    ``out_dir``: also write ``results.json`` there. Output locations are checked before simulating and the
+    results are written before the viewer is flushed, so a finished run is not lost."""
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
     sc = sc.with_overrides(seed=seed, time_limit_s=time_limit_s)
-    logger = make_logger(rerun, recording_name=f"{sc.name} seed {sc.seed}")
-    run = RescueRun(sc, logger=logger)
-    result = run.run(progress=progress)
+    out = None if out_dir is None else check_output_dir(out_dir)
     if rerun and rerun.startswith("save:"):
-        result["rerun_file"] = rerun[5:]
-    if out_dir is not None:
-        write_results(result, out_dir)
+        check_output_dir(Path(rerun[5:]).parent, "rerun save path")
+    logger = make_logger(rerun, recording_name=f"{sc.name} seed {sc.seed}",
+                         fallback_save=None if out is None else out / "rescue.rrd")
+    try:
+        result = RescueRun(sc, logger=logger).run(progress=progress, close_logger=False)
+        if logger.path is not None:
+            result["rerun_file"] = str(logger.path)
+        if out is not None:
+            write_results(result, out)
+    finally:
+        logger.close()
     return result
 
 

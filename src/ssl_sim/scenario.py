@@ -49,22 +49,21 @@ Every error names the file and the field (``paper_lab.toml: victims[0].position:
 """
 from __future__ import annotations
 
-import dataclasses
 import math
 import tomllib
-import types
-import typing
-from dataclasses import dataclass, field, fields, replace
+from dataclasses import dataclass, field, replace
 from pathlib import Path
 from typing import Any
 
 import numpy as np
 
+from robot.config_values import check_scalar, field_values
 from robot.motion import MotionConfig
 from robot.occupancy import OccupancyConfig
 from robot.planner import PlannerConfig
 from robot.rescue import RescueConfig
 from robot.sound_map import SoundMapConfig
+from ssl_core.gcc_phat import band_bins
 from ssl_core.localizer import LocalizerConfig
 from ssl_sim.acoustics import AcousticConfig, AmbientNoise, SoundSource, noise_source
 from ssl_sim.acoustics.signals import LoopedSignal
@@ -284,6 +283,15 @@ def _check_world(world: World, sc: Scenario, where: str) -> None:
         b = world.obstacles[hit]
         raise ScenarioError(f"{where}robot.start: ({x}, {y}) overlaps obstacle {hit} ({b.kind} at "
                             f"{list(b.center)}); the robot needs {RobotModelConfig().bumper_radius} m of free floor")
+    # Refused rather than settled: on debris the physics shoves the robot before its first command (measured in
+    # light_rubble: up to 11 cm and 11 deg within 1 s; issue 14 saw 0.19 m and -96 deg), and its odometry would
+    # start from a pose it is not at.
+    r = RobotModelConfig().bumper_radius
+    for k, b in enumerate(world.obstacles):
+        if b.climbable and _footprint_distance(b, x, y) < r:
+            raise ScenarioError(f"{where}robot.start: ({x}, {y}) puts the robot on climbable debris (obstacle {k}, "
+                                f"{b.kind} at {list(b.center)}, size {list(b.size)}); start it on flat floor, "
+                                f"{r} m (its radius) from any debris")
     n_explicit = len(sc.victims)
     for i, v in enumerate(world.victims):
         field_name = f"victims[{i}].position" if i < n_explicit else f"scene victim site {i - n_explicit}"
@@ -314,6 +322,14 @@ def _check_world(world: World, sc: Scenario, where: str) -> None:
                             f"path from the robot start to within success_radius_m = {sc.success_radius_m} m")
 
 
+def _footprint_distance(box, x: float, y: float) -> float:
+    """Horizontal distance (m) from (x, y) to ``box``'s footprint (0 inside)."""
+    c, s = math.cos(box.yaw), math.sin(box.yaw)
+    dx, dy = x - box.center[0], y - box.center[1]
+    local = np.abs([c * dx + s * dy, -s * dx + c * dy]) - np.asarray(box.size[:2]) / 2
+    return float(np.hypot(*np.maximum(local, 0.0)))
+
+
 def _resample(x: np.ndarray, fs_in: int, fs_out: int) -> np.ndarray:
     if fs_in == fs_out:
         return x
@@ -340,6 +356,8 @@ def resolve_scenario_path(name_or_path: str | Path) -> Path:
     if p.suffix.lower() == ".toml" or p.exists():
         if not p.exists():
             raise ScenarioError(f"scenario file not found: {p}")
+        if not p.is_file():
+            raise ScenarioError(f"scenario {p}: is a directory, expected a .toml file or one of {scenario_names()}")
         return p
     q = SCENARIOS_DIR / f"{name_or_path}.toml"
     if not q.exists():
@@ -354,6 +372,9 @@ def load_scenario(name_or_path: str | Path = DEFAULT_SCENARIO) -> Scenario:
         data = tomllib.loads(p.read_text())
     except tomllib.TOMLDecodeError as exc:
         raise ScenarioError(f"{p.name}: invalid TOML ({exc})") from None
+    except (OSError, UnicodeDecodeError) as exc:
+        raise ScenarioError(f"scenario {p}: cannot read it as TOML text ({getattr(exc, 'strerror', None) or exc})") \
+            from None
     sc = parse_scenario(data, base_dir=p.parent, path=str(p))
     sc.world()  # validates victims/start against the scene
     return sc
@@ -407,6 +428,7 @@ def parse_scenario(data: dict, base_dir: str | Path = ".", path: str = "") -> Sc
     except ValueError as exc:
         raise err(f"acoustics: {exc}") from None
     localizer = _dataclass(LocalizerConfig, _table(data, "localizer", where), "localizer", where)
+    _check_localizer(localizer, AcousticConfig(**acoustics).fs, where)
     beh = dict(_table(data, "behaviour", where))
     # The simulated robot's cube sits at RobotModelConfig.array_height: the range-from-elevation
     # estimate needs the true height unless the scenario deliberately says otherwise.
@@ -421,6 +443,17 @@ def parse_scenario(data: dict, base_dir: str | Path = ".", path: str = "") -> Sc
                     description=_get(data, "description", str, where, default=""), seed=seed,
                     time_limit_s=time_limit, success_radius_m=radius, robot_start=start, noise=noise,
                     acoustics=acoustics, localizer=localizer, behaviour=behaviour, path=str(path), **stages)
+
+
+def _check_localizer(cfg: LocalizerConfig, audio_fs: int, where: str) -> None:
+    """What would otherwise fail only when the run builds its Localizer, named now."""
+    if cfg.fs != audio_fs:
+        raise ScenarioError(f"{where}localizer.fs: {cfg.fs} Hz, but the simulated audio is {audio_fs} Hz; "
+                            "leave it out or set it to that")
+    try:
+        band_bins(cfg.fs, cfg.frame_size, cfg.band_hz)
+    except ValueError as exc:
+        raise ScenarioError(f"{where}localizer.band_hz: {exc}") from None
 
 
 def _scene(t: dict, base_dir: Path, where: str) -> SceneSpec:
@@ -464,6 +497,8 @@ def _load_wav(file: str, base_dir: Path, what: str, where: str) -> tuple[str, np
     if x.dtype.kind in "iu":
         x = x.astype(float) / float(np.iinfo(x.dtype).max)
     x = x.astype(float)
+    if not np.all(np.isfinite(x)):
+        raise ScenarioError(f"{where}{what}: {fp} holds {np.count_nonzero(~np.isfinite(x))} NaN/infinite samples")
     if x.ndim == 2:
         x = x.mean(axis=1)  # mono: mix the channels
     if x.size < fs // 10 or not np.any(x):
@@ -546,22 +581,13 @@ def _interferer(t: Any, i: int, base_dir: Path, where: str) -> InterfererSpec:
 
 
 # -- small typed accessors ------------------------------------------------------------------
-_TYPE_NAMES = {int: "an integer", float: "a number", str: "a string", bool: "true/false"}
 
 
 def _check_type(value: Any, typ: type, what: str, where: str) -> Any:
-    ok = (isinstance(value, bool) if typ is bool else
-          isinstance(value, int) and not isinstance(value, bool) if typ is int else
-          isinstance(value, (int, float)) and not isinstance(value, bool) if typ is float else
-          isinstance(value, typ))
-    if not ok:
-        raise ScenarioError(f"{where}{what}: expected {_TYPE_NAMES.get(typ, typ.__name__)}, "
-                            f"got {value!r} ({type(value).__name__})")
-    if typ is float:
-        if not math.isfinite(value):
-            raise ScenarioError(f"{where}{what}: expected a finite number, got {value!r}")
-        return float(value)
-    return value
+    try:
+        return check_scalar(value, typ, what)
+    except ValueError as exc:
+        raise ScenarioError(f"{where}{exc}") from None
 
 
 def _get(t: dict, key: str, typ: type, where: str, what: str | None = None, default: Any = None) -> Any:
@@ -601,39 +627,14 @@ def _no_unknown(t: dict, known: set[str], what: str, where: str) -> None:
 
 
 def _typed_kwargs(cls, t: dict, what: str, where: str) -> dict[str, Any]:
-    """Check ``t``'s values against the field annotations of dataclass ``cls`` (scalars, tuples, Optional)."""
-    hints = typing.get_type_hints(cls)
-    out = {}
-    for k, v in t.items():
-        out[k] = _coerce(v, hints[k], f"{what}.{k}", where)
-    return out
-
-
-def _coerce(v: Any, hint: Any, what: str, where: str) -> Any:
-    origin, args = typing.get_origin(hint), typing.get_args(hint)
-    if origin in (typing.Union, types.UnionType):
-        inner = [a for a in args if a is not type(None)]
-        if len(inner) == 1:
-            return _coerce(v, inner[0], what, where)  # TOML has no null: a value means "not None"
-        raise ScenarioError(f"{where}{what}: unsupported field type {hint}")
-    if origin is tuple:
-        if not isinstance(v, list):
-            raise ScenarioError(f"{where}{what}: expected a list, got {v!r}")
-        if len(args) == 2 and args[1] is Ellipsis:
-            return tuple(_coerce(x, args[0], what, where) for x in v)
-        if len(v) != len(args):
-            raise ScenarioError(f"{where}{what}: expected a list of {len(args)} values, got {v!r}")
-        return tuple(_coerce(x, a, what, where) for x, a in zip(v, args))
-    if hint in (int, float, str, bool):
-        return _check_type(v, hint, what, where)
-    if dataclasses.is_dataclass(hint):
-        raise ScenarioError(f"{where}{what}: cannot be set from a scenario file")
-    return v
+    """Check ``t``'s values against the field annotations of dataclass ``cls`` (robot.config_values)."""
+    try:
+        return field_values(cls, t, what)
+    except ValueError as exc:
+        raise ScenarioError(f"{where}{exc}") from None
 
 
 def _dataclass(cls, t: dict, what: str, where: str):
-    known = {f.name for f in fields(cls) if f.init}
-    _no_unknown(t, known, what, where)
     kwargs = _typed_kwargs(cls, t, what, where)
     try:
         return cls(**kwargs)

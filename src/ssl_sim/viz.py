@@ -25,20 +25,41 @@ Entities (world frame unless said otherwise; all lengths m)::
 """
 from __future__ import annotations
 
+import atexit
+import logging
 import math
+import os
+import shutil
+import socket
+import sys
+import threading
 import uuid
 from pathlib import Path
 from typing import Any, Sequence
+from urllib.parse import urlsplit
 
 import numpy as np
 
-__all__ = ["RunLogger", "NullLogger", "RerunLogger", "make_logger", "parse_rerun_target"]
+__all__ = ["RunLogger", "NullLogger", "RerunLogger", "ViewerUnavailable", "make_logger", "parse_rerun_target"]
+
+log = logging.getLogger(__name__)
+
+#: How long a viewer may take to accept the connection, and to take the last data at the end of a run.
+#: A local viewer answers in milliseconds; rerun 0.41 itself would wait forever (flush without a timeout).
+VIEWER_TIMEOUT_S = 3.0
+DEFAULT_VIEWER_ADDR = ("127.0.0.1", 9876)  # rerun's default gRPC port
+_RERUN_DISCONNECT_GRACE_S = 5.0  # rerun 0.41 waits this long for a connection when a sink shuts down (measured)
+
+
+class ViewerUnavailable(RuntimeError):
+    """No rerun viewer can be reached for ``spawn`` / ``connect``."""
 
 
 class RunLogger:
     """What the runner reports while a rescue runs; every method is a no-op here."""
 
     enabled = False
+    path: Path | None = None  # the .rrd file being written, if any
 
     def start(self, world, sources: Sequence, robot_config, title: str = "") -> None:
         """The scene: ``world`` (ssl_sim.world.World), ``sources`` (SoundSource list), robot model config."""
@@ -100,6 +121,35 @@ def parse_rerun_target(target: str) -> tuple[str, str | None]:
     return mode, arg
 
 
+def viewer_problem(mode: str, arg: str | None, timeout_s: float = VIEWER_TIMEOUT_S) -> str | None:
+    """Why a ``spawn`` / ``connect`` viewer cannot work here, or None. Checked before connecting, since
+    rerun's own connection retries in the background and its flush then blocks (issue 14)."""
+    if mode == "spawn":
+        if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
+            return "no display to spawn a viewer on (DISPLAY and WAYLAND_DISPLAY are unset)"
+        if shutil.which("rerun") is None:
+            return "the rerun viewer executable is not on PATH"
+        return None
+    if mode == "connect":
+        url = urlsplit(arg) if arg else None
+        host, port = (url.hostname, url.port or DEFAULT_VIEWER_ADDR[1]) if url and url.hostname else DEFAULT_VIEWER_ADDR
+        try:
+            with socket.create_connection((host, port), timeout=timeout_s) as s:
+                # A gRPC server answers the HTTP/2 preface with a SETTINGS frame (RFC 9113, 3.4); a port that
+                # accepts but never answers would make rerun's final flush and exit block forever.
+                s.sendall(_H2_PREFACE + _H2_EMPTY_SETTINGS)
+                head = s.recv(9)
+        except OSError as exc:
+            return f"no viewer answers at {host}:{port} ({exc.strerror or exc})"
+        if len(head) < 9 or head[3] != 0x04:
+            return f"{host}:{port} does not answer as a rerun viewer (gRPC) does"
+    return None
+
+
+_H2_PREFACE = b"PRI * HTTP/2.0\r\n\r\nSM\r\n\r\n"
+_H2_EMPTY_SETTINGS = bytes([0, 0, 0, 0x04, 0, 0, 0, 0, 0])  # length 0, type SETTINGS, no flags, stream 0
+
+
 _VICTIM_RGB = (230, 40, 40)
 _FOUND_RGB = (40, 200, 60)
 _OTHER_RGB = (255, 150, 0)
@@ -125,23 +175,35 @@ class RerunLogger(RunLogger):
     enabled = True
 
     def __init__(self, target: str = "save:out/run.rrd", application_id: str = "ssl_rescue",
-                 recording_name: str | None = None, srp_radius_m: float = 0.45, trail_every: int = 20) -> None:
+                 recording_name: str | None = None, srp_radius_m: float = 0.45, trail_every: int = 20,
+                 timeout_s: float = VIEWER_TIMEOUT_S) -> None:
+        """Raises :class:`ViewerUnavailable` when a ``spawn`` / ``connect`` viewer cannot be reached."""
         import rerun as rr
 
         self.rr = rr
         self.mode, arg = parse_rerun_target(target)
+        self.timeout_s = float(timeout_s)
+        if (problem := viewer_problem(self.mode, arg, self.timeout_s)) is not None:
+            raise ViewerUnavailable(problem)
         self.rec = rr.RecordingStream(application_id, recording_id=uuid.uuid4())
-        if self.mode == "save":
-            path = Path(arg)
-            path.parent.mkdir(parents=True, exist_ok=True)
-            self.rec.save(path)
-            self.path: Path | None = path
-        elif self.mode == "spawn":
-            self.rec.spawn()
-            self.path = None
-        else:
-            self.rec.connect_grpc(arg)
-            self.path = None
+        self.path: Path | None = None
+        self._closed = False
+        if self.mode != "save":
+            # rerun's own exit handler flushes without a timeout: a viewer that stops answering would hang the
+            # exit (also after Ctrl-C, before close() ran); ours is bounded.
+            rr.unregister_shutdown()
+            atexit.register(self.close)
+        try:
+            if self.mode == "save":
+                self.path = Path(arg)
+                self.path.parent.mkdir(parents=True, exist_ok=True)
+                self.rec.save(self.path)
+            elif self.mode == "spawn":
+                self.rec.spawn()
+            else:
+                self.rec.connect_grpc(arg)
+        except RuntimeError as exc:  # e.g. the viewer executable is missing
+            raise ViewerUnavailable(str(exc).strip().splitlines()[0]) from exc
         if recording_name:
             self.rec.send_recording_name(recording_name)
         self.srp_radius_m = float(srp_radius_m)
@@ -297,13 +359,49 @@ class RerunLogger(RunLogger):
         self.rec.log("log/state", rr.TextLog(state, level=rr.TextLogLevel.DEBUG))
 
     def close(self) -> None:
-        self.rec.flush()
+        """Flush and disconnect. A file is waited for; a viewer gets ``timeout_s`` for the flush plus rerun's own
+        5 s disconnect grace, then is abandoned with a warning (rerun 0.41 would block forever on a viewer that
+        stopped answering, also at interpreter exit)."""
+        if self._closed:
+            return
         if self.mode == "save":
+            self.rec.flush()
+            self.rec.disconnect()
+            self._closed = True
+            return
+        problems: list[str] = []
+
+        def finish() -> None:
+            try:
+                self.rec.flush(timeout_sec=self.timeout_s)
+            except RuntimeError as exc:  # rerun 0.41 raises on a flush timeout
+                problems.append(str(exc))
             self.rec.disconnect()
 
+        worker = threading.Thread(target=finish, name="rerun-close", daemon=True)
+        worker.start()
+        worker.join(self.timeout_s + _RERUN_DISCONNECT_GRACE_S + 1.0)
+        self._closed = True
+        if worker.is_alive():
+            problems.append("it stopped answering")
+        if problems:
+            log.warning("rerun viewer did not take the end of the recording (%s); its view is incomplete",
+                        "; ".join(problems))
 
-def make_logger(target: str | None, recording_name: str | None = None, **kw: Any) -> RunLogger:
-    """A RerunLogger for ``target`` (see :func:`parse_rerun_target`), or a NullLogger for None."""
+
+def make_logger(target: str | None, recording_name: str | None = None, fallback_save: str | Path | None = None,
+                **kw: Any) -> RunLogger:
+    """A RerunLogger for ``target`` (see :func:`parse_rerun_target`), or a NullLogger for None.
+
+    When a ``spawn`` / ``connect`` viewer cannot be reached the run goes on headless with a warning:
+    recorded to ``fallback_save`` (an .rrd path) if given, else not logged."""
     if not target:
         return NullLogger()
-    return RerunLogger(target, recording_name=recording_name, **kw)
+    try:
+        return RerunLogger(target, recording_name=recording_name, **kw)
+    except ViewerUnavailable as exc:
+        instead = f"recording to {fallback_save} instead" if fallback_save else "running without a viewer"
+        log.warning("rerun %s: %s; %s", target, exc, instead)
+        if fallback_save is None:
+            return NullLogger()
+        return RerunLogger(f"save:{fallback_save}", recording_name=recording_name, **kw)

@@ -200,6 +200,7 @@ class ChannelMerger:
         self.offset = 0
         self.estimate: OffsetEstimate | None = None
         self.dropped = 0          # device-0 samples skipped because device 1 had no data for them
+        self.slips = 0            # offset jumps beyond drift found (and corrected) by ``track``
         self._buf = [np.zeros((n, 0), np.int16) for n in config.device_channels]
         self._start = [0, 0]      # stream index of each buffer's first column
         self._cursor = 0          # device-0 stream index of the next output sample
@@ -344,6 +345,30 @@ class ChannelMerger:
         direction = -s / norm if norm > 0 else np.zeros(3)
         return delta, direction, rms
 
+    def track(self, window_s: float = 0.5, search_s: float = 0.002) -> OffsetEstimate | None:
+        """Follow the offset during a mission; applies and returns a changed, confident estimate, else None.
+
+        Re-measures within ``search_s`` of the current offset (clock drift, a sample now and then). When
+        that finds nothing trustworthy, or its peak sits at the edge of the search (the true offset may
+        lie beyond: the streams slipped, e.g. samples lost in a driver), the whole ``max_offset_s`` is
+        searched again (re-calibration): a narrow search alone once applied -30 for an 80-sample slip."""
+        est = self.estimate_offset(window_s, search_s)
+        at_edge = abs(est.offset_exact - self.offset) >= search_s * self.fs - 1.5
+        if not est.confident or at_edge:
+            est = self.estimate_offset(window_s, self.config.max_offset_s)
+        if not est.confident or est.offset == self.offset:
+            return None
+        jump = est.offset - self.offset
+        if abs(jump) > 2:  # beyond clock drift between two tracks
+            self.slips += 1
+            log.warning("audio devices slipped by %+d samples (%.1f ms): offset %d -> %s", jump,
+                        1e3 * jump / self.fs, self.offset, est)
+        else:
+            log.info("device offset drifted %d -> %s", self.offset, est)
+        self.set_offset(est.offset)
+        self.estimate = est
+        return est
+
     def calibrate(self, window_s: float = 0.5, search_s: float | None = None) -> OffsetEstimate:
         """Estimate the offset and apply it when the estimate is confident."""
         est = self.estimate_offset(window_s, search_s)
@@ -415,6 +440,7 @@ class ArrayCapture(AudioSource):
         self.track_every_s = track_every_s
         self.clock = clock or WallClock()
         self.overflows = 0
+        self._overflows_tracked = 0
         self._rate = int(sample_rate)
         n_q = max(4, int(queue_s * sample_rate / blocksize))
         self._queues = [queue.Queue(maxsize=n_q) for _ in (0, 1)]
@@ -481,19 +507,25 @@ class ArrayCapture(AudioSource):
         t = self._t0 + self.merger.cursor / self._rate
         out = self.merger.pop(n)
         self._since_track += n
-        if self.track_every_s is not None and self.merger.positions is not None \
-                and self._since_track >= self.track_every_s * self._rate:
-            self._since_track = 0
-            try:  # clock drift: re-measure near the current offset whenever a coherent sound is present
-                est = self.merger.estimate_offset(window_s=0.5, search_s=0.002)
-            except ValueError as exc:
+        # Track on schedule, and at once after lost samples (an overflow can shift one device's stream).
+        due = self.track_every_s is not None and self._since_track >= self.track_every_s * self._rate
+        if self.merger.positions is not None and (due or self.overflows != self._overflows_tracked):
+            try:
+                self.merger.track(window_s=0.5, search_s=0.002)
+                self._since_track, self._overflows_tracked = 0, self.overflows
+            except ValueError as exc:  # not enough audio buffered yet: try again on a later read
                 log.debug("offset tracking skipped: %s", exc)
-            else:
-                if est.confident and est.offset != self.merger.offset:
-                    log.info("device offset drifted %d -> %s", self.merger.offset, est)
-                    self.merger.set_offset(est.offset)
-                    self.merger.estimate = est
         return AudioBlock(out, self._rate, t)
+
+    def resync(self) -> None:
+        """Track the devices' offset now rather than on schedule (e.g. the health monitor saw a slip)."""
+        if self.merger.positions is None:
+            return
+        try:
+            self.merger.track(window_s=0.5, search_s=0.002)
+            self._since_track = 0
+        except ValueError as exc:
+            log.debug("offset re-sync skipped: %s", exc)
 
     def _get(self, d: int):
         try:
