@@ -132,6 +132,7 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", default="0:8", help="START:STOP (stop exclusive) or a comma list")
     ap.add_argument("--baseline", default="main", help="git ref of the old behaviour ('' = skip it)")
+    ap.add_argument("--baseline-src", default=None, help="or a directory holding the old behaviour's src")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--worker", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--paths", nargs="*", default=None, help=argparse.SUPPRESS)
@@ -146,15 +147,19 @@ def main(argv: list[str] | None = None) -> int:
         tmp = Path(d)
         new = _table(_run_version(ROOT / "src", _scenario_paths(tmp, old=False), seeds, args.workers, tmp, "new"))
         old = None
-        if args.baseline:
-            base = tmp / "baseline"
-            base.mkdir()
-            arch = subprocess.run(["git", "-C", str(ROOT), "archive", args.baseline, "src"], check=True,
-                                  capture_output=True).stdout
-            subprocess.run(["tar", "-x", "-C", str(base)], input=arch, check=True)
+        if args.baseline or args.baseline_src:
+            if args.baseline_src:
+                base_src = Path(args.baseline_src).resolve()
+            else:
+                base = tmp / "baseline"
+                base.mkdir()
+                arch = subprocess.run(["git", "-C", str(ROOT), "archive", args.baseline, "src"], check=True,
+                                      capture_output=True).stdout
+                subprocess.run(["tar", "-x", "-C", str(base)], input=arch, check=True)
+                base_src = base / "src"
             paths = _scenario_paths(tmp, old=True)
             try:
-                old = _table(_run_version(base / "src", paths, seeds, args.workers, tmp, "old"))
+                old = _table(_run_version(base_src, paths, seeds, args.workers, tmp, "old"))
             finally:
                 for p in paths:
                     if Path(p).name.startswith("."):
@@ -162,7 +167,7 @@ def main(argv: list[str] | None = None) -> int:
     print(f"seeds {seeds}; light_rubble_three limited to {TIME_LIMITS['light_rubble_three']:g} s\n")
     print("map-planning behaviour (this tree):\n" + _markdown(new) + "\n")
     if old:
-        print(f"old reactive behaviour ({args.baseline}):\n" + _markdown(old) + "\n")
+        print(f"old reactive behaviour ({args.baseline_src or args.baseline}):\n" + _markdown(old) + "\n")
     print(json.dumps({"bench": "rescue", "seeds": seeds, "new": new, "old": old,
                       "wall_s": round(time.perf_counter() - t0, 1)}))
     return 0

@@ -68,6 +68,7 @@ class PlannerConfig:
     max_sigma_m: float = 20.0          # not a target while more uncertain (a bearing above the horizon: no range)
     probe_sigma_m: float = 1.0         # more uncertain than this: drive probe_distance_m along its bearing
     probe_distance_m: float = 1.5
+    probe_angle_deg: float = 30.0      # ... that far off the bearing (a baseline for triangulation)
     min_listens: int = 2               # an interferer is checked once heard this often (not a stray reflection)
     stop_radius_m: float = 0.35        # plan to within this of a source's estimate
     unreachable_retry_s: float = 60.0  # a target without a path (or that bumps too often) is skipped this long
@@ -172,15 +173,18 @@ class Planner:
     # -- targets --------------------------------------------------------------------------
     def goal_of(self, s: MapSource, pose) -> np.ndarray:
         """Where to drive for a source: its estimate, or, while its range is unknown (1-sigma over
-        ``probe_sigma_m``: heard from one place, near the horizon), ``probe_distance_m`` along its bearing
-        (driving toward it steepens the elevation and gives the range)."""
+        ``probe_sigma_m``: heard from one place, near the horizon), ``probe_distance_m`` toward it but
+        ``probe_angle_deg`` off its bearing (closer, and across the bearing so that the next ones triangulate)."""
         cfg = self.config
         xy = np.asarray(pose[:2], float)
         v = s.position[:2] - xy
         d = float(np.hypot(*v))
-        if s.horizontal_sigma_m <= cfg.probe_sigma_m or d <= cfg.probe_distance_m or d < 1e-9:
+        if s.horizontal_sigma_m <= cfg.probe_sigma_m or d < 1e-9:
             return s.position[:2].copy()
-        return xy + v * (cfg.probe_distance_m / d)
+        # 30 deg off the bearing: closer, and across it, so that the next bearings cross this one.
+        a = math.atan2(v[1], v[0]) + math.radians(cfg.probe_angle_deg)
+        step = min(d, cfg.probe_distance_m)
+        return xy + step * np.array([math.cos(a), math.sin(a)])
 
     def mark_unreachable(self, source_id: int, time: float) -> None:
         self._unreachable[source_id] = time

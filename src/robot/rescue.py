@@ -115,7 +115,8 @@ class RescueConfig:
     #                                        shipped scenarios is 0.75 m: margin for a 0.3 m estimate error)
     found_sigma_m: float = 0.3             # ... and its horizontal 1-sigma below this
     supporting_elevation_deg: float = 10.0  # ... and heard now this far below horizontal (a mouth at 0.1 m within
-    #                                        1.1 m of a 0.3 m high array)
+    #                                        1.1 m of a 0.3 m high array), or triangulated from poses >= 0.6 m apart
+    #                                        to half of found_sigma_m (a mouth at the array's height)
     bump_found_range_m: float = 0.8        # criterion 4: bump while driving at a target estimated this close
     bump_ahead_deg: float = 35.0           # ... and this close to the direction of motion
     max_contacts_per_target: int = 3       # contacts while pursuing one source before it is set aside a while
@@ -378,7 +379,8 @@ class RescueBehaviour:
             # now must point down as a mouth on the floor within reach does (elevation supporting).
             if crit is None and d <= cfg.found_distance_m and s.horizontal_sigma_m <= cfg.found_sigma_m \
                     and s.n_inliers >= 3 and s.triangulated and not near_machine \
-                    and ev is not None and -math.degrees(ev.elevation) >= cfg.supporting_elevation_deg:
+                    and ((ev is not None and -math.degrees(ev.elevation) >= cfg.supporting_elevation_deg)
+                         or (s.horizontal_sigma_m <= 0.5 * cfg.found_sigma_m and s.baseline_m >= 0.6)):
                 crit = (f"map estimate {d:.2f} m away (<= {cfg.found_distance_m:g}), +- "
                         f"{s.horizontal_sigma_m:.2f} m from {s.n_inliers} listens")
             reached = d <= cfg.found_distance_m and s.horizontal_sigma_m <= cfg.found_sigma_m and s.triangulated

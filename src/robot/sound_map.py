@@ -85,7 +85,8 @@ class SoundMapConfig:
     inlier_deg: float = 12.0               # RANSAC: a ray this close to the hypothesis supports it
     gate_chi2: float = 13.8                # association gate: chi-square 2 dof, 99.9 %
     ransac_hypotheses: int = 96            # random ray pairs per refit (plus every single ray)
-    min_pair_angle_deg: float = 4.0        # two rays must cross at least this much to triangulate
+    min_pair_angle_deg: float = 15.0       # two rays must cross at least this much to triangulate (3 bearing
+    #                                        sigmas: a shallower crossing puts the point anywhere along the rays)
     merge_distance_m: float = 0.5          # two sources closer than this (horizontally) are one
     max_rays: int = 120                    # history kept per source (newest)
     forget_s: float = 40.0                 # a source with < 3 listens unheard this long is dropped
