@@ -19,7 +19,10 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
+
 from scipy import ndimage
+
+from robot.config_values import need
 
 __all__ = ["OccupancyConfig", "OccupancyGrid"]
 
@@ -36,17 +39,13 @@ class OccupancyConfig:
     max_log_odds: float = 6.0
 
     def __post_init__(self) -> None:
-        def need(ok: bool, name: str, expected: str) -> None:
-            if not ok:
-                raise ValueError(f"OccupancyConfig.{name}={getattr(self, name)!r}: expected {expected}")
-
-        need(self.resolution_m > 0, "resolution_m", "> 0 m")
-        need(self.size_m >= 10 * self.resolution_m, "size_m", f">= 10 cells ({10 * self.resolution_m} m)")
-        need(self.robot_radius_m > 0, "robot_radius_m", "> 0 m")
-        need(self.contact_width_m > 0, "contact_width_m", "> 0 m")
-        need(self.hit_log_odds > 0, "hit_log_odds", "> 0")
-        need(self.free_log_odds < 0, "free_log_odds", "< 0")
-        need(0 < self.occupied_log_odds <= self.max_log_odds, "occupied_log_odds", "in (0, max_log_odds]")
+        need(self, self.resolution_m > 0, "resolution_m", "> 0 m")
+        need(self, self.size_m >= 10 * self.resolution_m, "size_m", f">= 10 cells ({10 * self.resolution_m} m)")
+        need(self, self.robot_radius_m > 0, "robot_radius_m", "> 0 m")
+        need(self, self.contact_width_m > 0, "contact_width_m", "> 0 m")
+        need(self, self.hit_log_odds > 0, "hit_log_odds", "> 0")
+        need(self, self.free_log_odds < 0, "free_log_odds", "< 0")
+        need(self, 0 < self.occupied_log_odds <= self.max_log_odds, "occupied_log_odds", "in (0, max_log_odds]")
 
 
 class OccupancyGrid:

@@ -32,6 +32,7 @@ from typing import NamedTuple
 
 import numpy as np
 
+from robot.config_values import need
 from robot.hal import WheelOdometry
 from robot.kinematics import OmniDriveParams, forward_kinematics, integrate_pose
 
@@ -55,14 +56,10 @@ class GyroFusionConfig:
     bias_time_constant_s: float = 10.0  # s of gripping drive over which the bias estimate settles
 
     def __post_init__(self) -> None:
-        def need(ok: bool, name: str, expected: str) -> None:
-            if not ok:
-                raise ValueError(f"GyroFusionConfig.{name}={getattr(self, name)!r}: expected {expected}")
-
-        need(self.max_gyro_dt_s > 0, "max_gyro_dt_s", "> 0 s")
-        need(self.slip_rate > 0, "slip_rate", "> 0 rad/s")
-        need(0 <= self.wheel_weight <= 1, "wheel_weight", "a fraction in [0, 1]")
-        need(self.bias_time_constant_s > 0, "bias_time_constant_s", "> 0 s")
+        need(self, self.max_gyro_dt_s > 0, "max_gyro_dt_s", "> 0 s")
+        need(self, self.slip_rate > 0, "slip_rate", "> 0 rad/s")
+        need(self, 0 <= self.wheel_weight <= 1, "wheel_weight", "a fraction in [0, 1]")
+        need(self, self.bias_time_constant_s > 0, "bias_time_constant_s", "> 0 s")
 
 
 class Odometry:

@@ -28,6 +28,7 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse.csgraph import dijkstra
 
+from robot.config_values import need
 from robot.occupancy import OccupancyGrid
 from robot.sound_map import MapSource, SourceClass, SourceState
 
@@ -76,22 +77,18 @@ class PlannerConfig:
     explore_headings: int = 16
 
     def __post_init__(self) -> None:
-        def need(ok: bool, name: str, expected: str) -> None:
-            if not ok:
-                raise ValueError(f"PlannerConfig.{name}={getattr(self, name)!r}: expected {expected}")
-
-        need(self.recency_s > 0, "recency_s", "> 0 s")
-        need(self.distance_scale_m > 0, "distance_scale_m", "> 0 m")
-        need(self.keep_factor >= 1, "keep_factor", ">= 1")
-        need(self.sigma_scale_m > 0, "sigma_scale_m", "> 0 m")
-        need(self.max_sigma_m > 0, "max_sigma_m", "> 0 m")
-        need(self.probe_sigma_m > 0 and self.probe_distance_m > 0, "probe_sigma_m", "> 0 m (and probe_distance_m)")
-        need(self.stale_s > 0, "stale_s", "> 0 s")
-        need(self.min_listens >= 1, "min_listens", "an integer >= 1")
-        need(self.stop_radius_m >= 0, "stop_radius_m", ">= 0 m")
-        need(self.unreachable_retry_s >= 0, "unreachable_retry_s", ">= 0 s")
-        need(self.explore_distance_m > 0, "explore_distance_m", "> 0 m")
-        need(self.explore_headings >= 4, "explore_headings", "an integer >= 4")
+        need(self, self.recency_s > 0, "recency_s", "> 0 s")
+        need(self, self.distance_scale_m > 0, "distance_scale_m", "> 0 m")
+        need(self, self.keep_factor >= 1, "keep_factor", ">= 1")
+        need(self, self.sigma_scale_m > 0, "sigma_scale_m", "> 0 m")
+        need(self, self.max_sigma_m > 0, "max_sigma_m", "> 0 m")
+        need(self, self.probe_sigma_m > 0 and self.probe_distance_m > 0, "probe_sigma_m", "> 0 m (and probe_distance_m)")
+        need(self, self.stale_s > 0, "stale_s", "> 0 s")
+        need(self, self.min_listens >= 1, "min_listens", "an integer >= 1")
+        need(self, self.stop_radius_m >= 0, "stop_radius_m", ">= 0 m")
+        need(self, self.unreachable_retry_s >= 0, "unreachable_retry_s", ">= 0 s")
+        need(self, self.explore_distance_m > 0, "explore_distance_m", "> 0 m")
+        need(self, self.explore_headings >= 4, "explore_headings", "an integer >= 4")
 
 
 @dataclass(frozen=True)

@@ -42,6 +42,7 @@ from typing import Protocol, Sequence
 
 import numpy as np
 
+from robot.config_values import need
 from robot.odometry import Pose2D
 
 __all__ = ["BearingEvidence", "SoundMapConfig", "SourceClass", "SourceState", "Listen", "MapSource", "SoundMap",
@@ -98,25 +99,21 @@ class SoundMapConfig:
     seed: int = 0                          # RANSAC sampling
 
     def __post_init__(self) -> None:
-        def need(ok: bool, name: str, expected: str) -> None:
-            if not ok:
-                raise ValueError(f"SoundMapConfig.{name}={getattr(self, name)!r}: expected {expected}")
-
-        need(self.array_height_m > 0, "array_height_m", "> 0 m")
-        need(self.source_height_sigma_m > 0, "source_height_sigma_m", "> 0 m")
-        need(0 < self.bearing_sigma_deg < 45, "bearing_sigma_deg", "in (0, 45) degrees")
-        need(0 < self.elevation_sigma_deg < 45, "elevation_sigma_deg", "in (0, 45) degrees")
-        need(0 < self.inlier_deg < 90, "inlier_deg", "in (0, 90) degrees")
-        need(self.gate_chi2 > 0, "gate_chi2", "> 0")
-        need(self.ransac_hypotheses >= 1, "ransac_hypotheses", "an integer >= 1")
-        need(0 <= self.min_pair_angle_deg < 90, "min_pair_angle_deg", "in [0, 90) degrees")
-        need(self.merge_distance_m >= 0, "merge_distance_m", ">= 0 m")
-        need(self.max_rays >= 2, "max_rays", "an integer >= 2")
-        need(self.forget_s > 0, "forget_s", "> 0 s")
-        need(0 <= self.interferer_probability <= self.victim_probability <= 1, "victim_probability",
+        need(self, self.array_height_m > 0, "array_height_m", "> 0 m")
+        need(self, self.source_height_sigma_m > 0, "source_height_sigma_m", "> 0 m")
+        need(self, 0 < self.bearing_sigma_deg < 45, "bearing_sigma_deg", "in (0, 45) degrees")
+        need(self, 0 < self.elevation_sigma_deg < 45, "elevation_sigma_deg", "in (0, 45) degrees")
+        need(self, 0 < self.inlier_deg < 90, "inlier_deg", "in (0, 90) degrees")
+        need(self, self.gate_chi2 > 0, "gate_chi2", "> 0")
+        need(self, self.ransac_hypotheses >= 1, "ransac_hypotheses", "an integer >= 1")
+        need(self, 0 <= self.min_pair_angle_deg < 90, "min_pair_angle_deg", "in [0, 90) degrees")
+        need(self, self.merge_distance_m >= 0, "merge_distance_m", ">= 0 m")
+        need(self, self.max_rays >= 2, "max_rays", "an integer >= 2")
+        need(self, self.forget_s > 0, "forget_s", "> 0 s")
+        need(self, 0 <= self.interferer_probability <= self.victim_probability <= 1, "victim_probability",
              f"in [interferer_probability ({self.interferer_probability}), 1]")
-        need(self.max_log_odds > 0, "max_log_odds", "> 0")
-        need(0 < self.min_range_m < self.max_range_m, "min_range_m", "in (0, max_range_m) m")
+        need(self, self.max_log_odds > 0, "max_log_odds", "> 0")
+        need(self, 0 < self.min_range_m < self.max_range_m, "min_range_m", "in (0, max_range_m) m")
 
 
 @dataclass(frozen=True)
