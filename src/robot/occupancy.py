@@ -19,7 +19,6 @@ import math
 from dataclasses import dataclass
 
 import numpy as np
-
 from scipy import ndimage
 
 from robot.config_values import need
