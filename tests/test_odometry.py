@@ -163,13 +163,13 @@ def test_gyro_aided_odometry_against_mujoco_truth_in_light_rubble():
 
     run = RescueRun(load_scenario("light_rubble_three").with_overrides(seed=0, time_limit_s=200.0))
     wheels = Odometry(run.robot.params, run.world.robot_start)
-    fused_update = run.behaviour._update_odometry
+    fused_update = run.behaviour.motion.update_odometry
 
     def both():
         wheels.update(run.drive.odometry())
         return fused_update()
 
-    run.behaviour._update_odometry = both
+    run.behaviour.motion.update_odometry = both
     r = run.run()
     truth = run.robot.pose()
     fused = run.behaviour.odometry.pose
