@@ -93,12 +93,18 @@ def _scenario_paths(tmp: Path, old: bool) -> list[str]:
     return out
 
 
-def _run_version(src: Path, paths: list[str], seeds: list[int], workers: int, tmp: Path, tag: str) -> list[dict]:
+def _start_version(src: Path, paths: list[str], seeds: list[int], workers: int, tmp: Path, tag: str):
+    """Start one code version's runs in a worker process; returns (process, output file)."""
     out = tmp / f"{tag}.json"
     env = dict(os.environ, PYTHONPATH=str(src))
     cmd = [sys.executable, __file__, "--worker", str(out), "--workers", str(workers),
            "--seeds", ",".join(map(str, seeds)), "--paths", *paths]
-    subprocess.run(cmd, env=env, check=True, cwd=str(ROOT))
+    return subprocess.Popen(cmd, env=env, cwd=str(ROOT)), out
+
+
+def _finish(proc, out: Path) -> list[dict]:
+    if proc.wait() != 0:
+        raise RuntimeError(f"bench worker failed (exit {proc.returncode})")
     return json.loads(out.read_text())
 
 
@@ -145,8 +151,9 @@ def main(argv: list[str] | None = None) -> int:
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
-        new = _table(_run_version(ROOT / "src", _scenario_paths(tmp, old=False), seeds, args.workers, tmp, "new"))
-        old = None
+        # Both versions at once (each with ``workers`` processes): the same seeds, the same scenario files.
+        jobs = {"new": _start_version(ROOT / "src", _scenario_paths(tmp, old=False), seeds, args.workers, tmp, "new")}
+        old_paths: list[str] = []
         if args.baseline or args.baseline_src:
             if args.baseline_src:
                 base_src = Path(args.baseline_src).resolve()
@@ -157,13 +164,15 @@ def main(argv: list[str] | None = None) -> int:
                                       capture_output=True).stdout
                 subprocess.run(["tar", "-x", "-C", str(base)], input=arch, check=True)
                 base_src = base / "src"
-            paths = _scenario_paths(tmp, old=True)
-            try:
-                old = _table(_run_version(base_src, paths, seeds, args.workers, tmp, "old"))
-            finally:
-                for p in paths:
-                    if Path(p).name.startswith("."):
-                        Path(p).unlink(missing_ok=True)
+            old_paths = _scenario_paths(tmp, old=True)
+            jobs["old"] = _start_version(base_src, old_paths, seeds, args.workers, tmp, "old")
+        try:
+            rows = {tag: _finish(*job) for tag, job in jobs.items()}
+        finally:
+            for p in old_paths:
+                if Path(p).name.startswith("."):
+                    Path(p).unlink(missing_ok=True)
+        new, old = _table(rows["new"]), (_table(rows["old"]) if "old" in rows else None)
     print(f"seeds {seeds}; light_rubble_three limited to {TIME_LIMITS['light_rubble_three']:g} s\n")
     print("map-planning behaviour (this tree):\n" + _markdown(new) + "\n")
     if old:
