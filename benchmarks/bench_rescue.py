@@ -140,6 +140,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--baseline", default="main", help="git ref of the old behaviour ('' = skip it)")
     ap.add_argument("--baseline-src", default=None, help="or a directory holding the old behaviour's src")
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--rows-out", default=None, help="also write every run's row (JSON) here")
+    ap.add_argument("--rows-in", nargs="*", default=(), help="rows files of earlier runs to add to the tables")
     ap.add_argument("--worker", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--paths", nargs="*", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -172,6 +174,12 @@ def main(argv: list[str] | None = None) -> int:
             for p in old_paths:
                 if Path(p).name.startswith("."):
                     Path(p).unlink(missing_ok=True)
+        for f in args.rows_in:      # e.g. other seeds run earlier: one table over all of them
+            for tag, rs in json.loads(Path(f).read_text()).items():
+                rows.setdefault(tag, []).extend(rs)
+        if args.rows_out:
+            Path(args.rows_out).write_text(json.dumps(rows))
+        seeds = sorted({r["seed"] for r in rows["new"]})
         new, old = _table(rows["new"]), (_table(rows["old"]) if "old" in rows else None)
     print(f"seeds {seeds}; light_rubble_three limited to {TIME_LIMITS['light_rubble_three']:g} s\n")
     print("map-planning behaviour (this tree):\n" + _markdown(new) + "\n")
