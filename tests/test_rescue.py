@@ -374,8 +374,8 @@ def test_keeps_its_target_between_two_intermittent_callers():
 def test_config_errors_name_the_field():
     with pytest.raises(ValueError, match="RescueConfig.listen_s"):
         RescueConfig(listen_s=0)
-    with pytest.raises(ValueError, match="source_height_m"):
-        RescueConfig(source_height_m=0.5)
+    with pytest.raises(ValueError, match="found_distance_m"):
+        RescueConfig(found_distance_m=0.0)
     with pytest.raises(ValueError, match="max_victims"):
         RescueConfig(max_victims=0)
     w = World([])

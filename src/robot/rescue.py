@@ -106,7 +106,6 @@ class RescueConfig:
     require_voice: bool = False            # approach only sources classified victim (not unclassified ones)
     # geometry (shared with the sound map: one source of truth for the array height)
     array_height_m: float = 0.30           # array centre above the floor
-    source_height_m: float = 0.10          # assumed mouth height of a victim lying on the floor
     # found
     found_elevation_deg: float = 30.0      # criterion 1: bearing steeper than this below horizontal
     corroborated_elevation_deg: float = 20.0  # criterion 2: this steep (mouth within ~0.55 m) ...
@@ -142,9 +141,6 @@ class RescueConfig:
                 raise ValueError(f"RescueConfig.{name}: expected > 0, got {getattr(self, name)}")
         if not 0 < self.found_elevation_deg < 90 or not 0 < self.corroborated_elevation_deg < 90:
             raise ValueError("RescueConfig.found_elevation_deg / corroborated_elevation_deg: expected 0 < deg < 90")
-        if not self.source_height_m < self.array_height_m:
-            raise ValueError(f"RescueConfig.source_height_m: expected below array_height_m = {self.array_height_m} m, "
-                             f"got {self.source_height_m}")
         if not 0 <= self.voice_threshold <= 1:
             raise ValueError(f"RescueConfig.voice_threshold: expected 0..1, got {self.voice_threshold}")
         if self.min_step_m > self.step_m:
@@ -157,13 +153,6 @@ class RescueConfig:
                 raise ValueError(f"RescueConfig.{name}: expected an integer >= 1, got {getattr(self, name)}")
         if self.max_victims is not None and self.max_victims < 1:
             raise ValueError(f"RescueConfig.max_victims: expected None or >= 1, got {self.max_victims}")
-
-    def range_from_elevation(self, elevation: float) -> float | None:
-        """Horizontal range (m) to a mouth at ``source_height_m`` seen at ``elevation`` (rad, array frame),
-        or None when the bearing is not below the horizon enough to tell (> -2 deg)."""
-        if elevation > -np.deg2rad(2.0):
-            return None
-        return (self.array_height_m - self.source_height_m) / math.tan(-elevation)
 
 
 @dataclass(frozen=True)
