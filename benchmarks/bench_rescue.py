@@ -138,7 +138,8 @@ def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", default="0:8", help="START:STOP (stop exclusive) or a comma list")
     ap.add_argument("--baseline", default="main", help="git ref of the old behaviour ('' = skip it)")
-    ap.add_argument("--baseline-src", default=None, help="or a directory holding the old behaviour's src")
+    ap.add_argument("--baseline-src", default=None,
+                    help="or the src directory of a checkout of the old behaviour (with its models/, data/ beside)")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--rows-out", default=None, help="also write every run's row (JSON) here")
     ap.add_argument("--rows-in", nargs="*", default=(), help="rows files of earlier runs to add to the tables")
@@ -162,7 +163,8 @@ def main(argv: list[str] | None = None) -> int:
             else:
                 base = tmp / "baseline"
                 base.mkdir()
-                arch = subprocess.run(["git", "-C", str(ROOT), "archive", args.baseline, "src"], check=True,
+                # the whole tree: the code finds its scenes and sounds beside src (models/, data/)
+                arch = subprocess.run(["git", "-C", str(ROOT), "archive", args.baseline], check=True,
                                       capture_output=True).stdout
                 subprocess.run(["tar", "-x", "-C", str(base)], input=arch, check=True)
                 base_src = base / "src"
