@@ -118,6 +118,8 @@ class RescueConfig:
     #                                        to half of found_sigma_m (a mouth at the array's height)
     bump_found_range_m: float = 0.8        # criterion 4: bump while driving at a target estimated this close
     bump_ahead_deg: float = 35.0           # ... and this close to the direction of motion
+    found_exclusion_m: float = 0.8         # a source this close to a found victim is that victim (the runner's
+    #                                        success radius is 0.75 m: two victims closer are one find anyway)
     max_contacts_per_target: int = 3       # contacts while pursuing one source before it is set aside a while
     machine_radius_m: float = 1.0          # within this of a rejected interferer, only a voice declares a victim
     reject_after_listens: int = 4          # listens of an interferer from close up before it is rejected (a caller
@@ -347,7 +349,7 @@ class RescueBehaviour:
                 s = self.map.source(sid)
             except KeyError:
                 continue
-            if s.state in (SourceState.FOUND, SourceState.REJECTED):
+            if s.state in (SourceState.FOUND, SourceState.REJECTED) or self._near_found(s):
                 continue
             crit = None
             ev = heard_by.get(sid)
@@ -399,6 +401,12 @@ class RescueBehaviour:
             self._declare_found(s, crit)
             return True
         return False
+
+    def _near_found(self, s: MapSource) -> bool:
+        """Within ``found_exclusion_m`` of a victim already found: another bearing of it (a reflection, a
+        second track), never a second victim to declare (measured: a duplicate 0.5 m from a found caller)."""
+        return any(o.id != s.id and o.state is SourceState.FOUND
+                   and o.distance_to(s.position) <= self.config.found_exclusion_m for o in self.map.sources)
 
     def _near_machine(self, s: MapSource) -> bool:
         return any(o.id != s.id and o.state is SourceState.REJECTED
@@ -513,7 +521,8 @@ class RescueBehaviour:
             d = s.distance_to((x, y))
             off = abs(wrap_angle(math.atan2(s.position[1] - y, s.position[0] - x) - b.heading))
             if d <= cfg.bump_found_range_m and off <= math.radians(cfg.bump_ahead_deg) \
-                    and s.state is not SourceState.FOUND and self._approachable(s) \
+                    and s.state is not SourceState.FOUND and self._approachable(s) and not self._near_found(s) \
+                    and s.horizontal_sigma_m <= 2 * cfg.found_sigma_m \
                     and (s.cls is SourceClass.VICTIM or not self._near_machine(s)):
                 self._declare_found(s, f"bumped into it while approaching (estimate {d:.2f} m ahead, "
                                        f"{math.degrees(off):.0f} deg off the motion)")
