@@ -378,6 +378,22 @@ class RescueBehaviour:
             reached = d <= cfg.found_distance_m and s.horizontal_sigma_m <= cfg.found_sigma_m and s.triangulated
             if crit is None and reached and not self._approachable(s):
                 crit = f"map estimate {d:.2f} m away, +- {s.horizontal_sigma_m:.2f} m"   # a machine: no elevation cue
+            elif crit is None and reached:
+                # At its estimate and no cue says a mouth is here: listen a few times, then it is a reflection
+                # (a mirror image beyond a wall triangulates as tightly as a caller: measured in light rubble).
+                n = self._close_listens[s.id] = self._close_listens.get(s.id, 0) + 1
+                if n < cfg.reject_after_listens:
+                    self._emit(Decision.NO_TARGET, f"at the estimate of source #{s.id} ({d:.2f} m), no found cue "
+                                                   f"yet: listen again ({n}/{cfg.reject_after_listens})",
+                               {"source": s.id})
+                    return True
+                self.map.set_state(s.id, SourceState.REJECTED, self.clock.now())
+                if self.target == s.id:
+                    self.target, self.plan = None, None
+                self._emit(Decision.REJECTED, f"source #{s.id}: at its estimate ({d:.2f} m) for "
+                                              f"{cfg.reject_after_listens} listens without a found cue: a reflection",
+                           {"source": s.id, "position": s.position.tolist()})
+                continue
             if crit is None:
                 continue
             voiced = any(r.voice_probability >= 0.5 for r in s.history)
