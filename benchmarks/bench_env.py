@@ -1,13 +1,14 @@
 """Speed of SSLRescue-v0: environment steps per second, and fast-vs-full localization fidelity.
 
-- one environment on one core (BLAS limited to one thread), fast and full fidelity: steps/s over
+- one environment on one core (BLAS limited to one thread), fast and full fidelity: steps per CPU second over
   random actions in the default generated scene (after the episode's build), with the time per
   step split into physics (MuJoCo), acoustic rendering, SRP-PHAT localization and the rest;
   plus the cost of a reset that builds a new scene;
 - a 2-process ``gymnasium.vector.AsyncVectorEnv`` (fast): environment steps per second summed
   over both workers (the machine's two cores; shared with whatever else runs);
 - fidelity: localization errors of the observation's strongest detection, fast vs full, on the
-  same poses (``ssl_sim.envs.fidelity``).
+  same poses (``ssl_sim.envs.fidelity``); and the kinematic (fast) against the dynamic (full) drive:
+  pose after one step from rest with the same action.
 
 Prints a table and one JSON line. Run: ``.venv/bin/python benchmarks/bench_env.py`` (``--quick``
 for fewer steps and poses).
@@ -26,20 +27,22 @@ import time  # noqa: E402
 from collections import defaultdict  # noqa: E402
 
 import gymnasium as gym  # noqa: E402
+import numpy as np  # noqa: E402
 
 from ssl_sim.envs import EnvConfig, SSLRescueEnv  # noqa: E402
 from ssl_sim.envs.fidelity import compare_fidelities, fidelity_summary  # noqa: E402
 
 
 def _timed(obj, name: str, acc: dict, key: str) -> None:
+    """Accumulate the CPU time (this process) of ``obj.name`` calls into ``acc[key]``."""
     fn = getattr(obj, name)
 
     def wrapper(*a, **k):
-        t = time.perf_counter()
+        t = time.process_time()
         try:
             return fn(*a, **k)
         finally:
-            acc[key] += time.perf_counter() - t
+            acc[key] += time.process_time() - t
 
     setattr(obj, name, wrapper)
 
@@ -52,18 +55,20 @@ def single(fidelity: str, steps: int, seed: int = 0) -> dict:
     acc: dict = defaultdict(float)
     ep = env._ep
     _timed(ep.robot, "step", acc, "physics")
+    _timed(env, "_drive_kinematic", acc, "physics")  # fast fidelity: kinematic moves + bumper checks
     _timed(ep.acoustics, "listen", acc, "acoustics")
     _timed(env.localizer, "locate", acc, "localization")
     env.action_space.seed(seed)
     actions = [env.action_space.sample() for _ in range(steps)]
     done = 0
-    t = time.perf_counter()
+    t, c = time.perf_counter(), time.process_time()
     for a in actions:
         _, _, term, _, _ = env.step(a)
         done += 1
         if term:
-            break
+            env.reset()
     wall = time.perf_counter() - t
+    cpu = time.process_time() - c
     # resets that build a new scene (new seeds) vs one that reuses the cached build
     t = time.perf_counter()
     for s in range(1000, 1003):
@@ -71,10 +76,39 @@ def single(fidelity: str, steps: int, seed: int = 0) -> dict:
     new_scene = (time.perf_counter() - t) / 3
     env.close()
     ms = {k: 1e3 * v / done for k, v in acc.items()}
-    ms["other"] = 1e3 * wall / done - sum(ms.values())
-    return {"fidelity": fidelity, "steps": done, "steps_per_s": done / wall, "ms_per_step": 1e3 * wall / done,
+    ms["other"] = 1e3 * cpu / done - sum(ms.values())
+    return {"fidelity": fidelity, "steps": done, "steps_per_s": done / cpu, "wall_steps_per_s": done / wall,
+            "ms_per_step": 1e3 * cpu / done,
             "ms_breakdown": {k: round(v, 2) for k, v in ms.items()}, "first_reset_s": build,
             "reset_new_scene_s": new_scene}
+
+
+def drive_fidelity(n: int = 12) -> dict:
+    """Kinematic (fast) against dynamic (full) drive: the same random action from the same start pose,
+    one step; pose difference after it (position m, yaw deg) against the distance driven."""
+    envs = {f: SSLRescueEnv(EnvConfig(fidelity=f)) for f in ("fast", "full")}
+    rng = np.random.default_rng(7)
+    dpos, dyaw, moved = [], [], []
+    try:
+        for k in range(n):
+            a = rng.uniform(-1, 1, 3).astype(np.float32)
+            poses = {}
+            for f, e in envs.items():
+                e.reset(seed=200 + k)
+                p0 = e._ep.robot.pose()
+                e.step(a)
+                p = e._ep.robot.pose()
+                poses[f] = (p.x, p.y, p.yaw, p0.x, p0.y)
+            (x1, y1, w1, x0, y0), (x2, y2, w2, _, _) = poses["fast"], poses["full"]
+            dpos.append(float(np.hypot(x1 - x2, y1 - y2)))
+            dyaw.append(abs(float(np.degrees((w1 - w2 + np.pi) % (2 * np.pi) - np.pi))))
+            moved.append(float(np.hypot(x2 - x0, y2 - y0)))
+    finally:
+        for e in envs.values():
+            e.close()
+    return {"steps": n, "pos_diff_median_m": float(np.median(dpos)), "pos_diff_max_m": float(np.max(dpos)),
+            "yaw_diff_median_deg": float(np.median(dyaw)), "yaw_diff_max_deg": float(np.max(dyaw)),
+            "full_moved_median_m": float(np.median(moved))}
 
 
 def vector(steps: int, workers: int = 2) -> dict:
@@ -104,6 +138,7 @@ def main() -> None:
     fast = single("fast", n_fast)
     full = single("full", n_full)
     vec = vector(n_vec)
+    drive = drive_fidelity(6 if args.quick else 20)
     t = time.perf_counter()
     fid = fidelity_summary(compare_fidelities(EnvConfig(), seeds, poses))
     fid_wall = time.perf_counter() - t
@@ -111,22 +146,27 @@ def main() -> None:
     print(f"SSLRescue-v0, default generated scene, 1 victim; step = 0.5 s drive + 0.1 s settle + 0.25 s listen "
           f"(0.85 s simulated); {platform.processor() or platform.machine()}, load average "
           f"{os.getloadavg()[0]:.2f} on {os.cpu_count()} cores")
-    print("| case | steps/s | ms/step | physics | acoustics | localization | other | new-scene reset (s) |")
+    print("CPU time of this process (the machine is shared: wall-clock steps/s in the JSON line)")
+    print("| case | steps/s (CPU) | ms/step | physics | acoustics | localization | other | new-scene reset (s) |")
     print("|---|---|---|---|---|---|---|---|")
     for r in (fast, full):
         b = r["ms_breakdown"]
         print(f"| {r['fidelity']}, 1 env, 1 core | {r['steps_per_s']:.1f} | {r['ms_per_step']:.1f} | "
               f"{b.get('physics', 0):.1f} | {b.get('acoustics', 0):.1f} | {b.get('localization', 0):.1f} | "
               f"{b['other']:.1f} | {r['reset_new_scene_s']:.2f} |")
-    print(f"| fast, AsyncVectorEnv x{vec['workers']} | {vec['env_steps_per_s']:.1f} (sum) | | | | | | |")
+    print(f"| fast, AsyncVectorEnv x{vec['workers']} | {vec['env_steps_per_s']:.1f} (sum, wall) | | | | | | |")
     print()
+    print(f"Drive, kinematic (fast) vs dynamic (full), one step from rest with the same random action "
+          f"({drive['steps']} steps; full drove {drive['full_moved_median_m']:.3f} m median): position differs "
+          f"{drive['pos_diff_median_m']:.3f} m median ({drive['pos_diff_max_m']:.3f} max), yaw "
+          f"{drive['yaw_diff_median_deg']:.1f} deg median ({drive['yaw_diff_max_deg']:.1f} max)")
     print(f"Fidelity on {fid['poses']} poses ({fid['both_detected']} detected by both; 0.5-3.5 m from the victim, "
           f"{fid_wall:.0f} s): azimuth error mean fast {fid['az_mean_fast']:.2f} / full {fid['az_mean_full']:.2f} deg "
           f"(diff {fid['az_mean_diff']:.2f}), median {fid['az_median_fast']:.2f} / {fid['az_median_full']:.2f} deg "
           f"(diff {fid['az_median_diff']:.2f}); per pose |fast - full| median {fid['az_per_pose_absdiff_median']:.2f}, "
           f"p90 {fid['az_per_pose_absdiff_p90']:.2f} deg, {100 * fid['az_per_pose_within_1deg']:.0f} % within 1 deg; "
           f"detection rate {fid['detection_rate_fast']:.2f} / {fid['detection_rate_full']:.2f}")
-    line = {"benchmark": "bench_env", "fast": fast, "full": full, "vector": vec,
+    line = {"benchmark": "bench_env", "fast": fast, "full": full, "vector": vec, "drive": drive,
             "fidelity": {k: (round(v, 3) if isinstance(v, float) else v) for k, v in fid.items()},
             "loadavg_1min": os.getloadavg()[0], "cpus": os.cpu_count(), "quick": args.quick}
     print(json.dumps(line))

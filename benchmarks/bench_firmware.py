@@ -7,7 +7,9 @@
   complete on the same byte (the parser's worst case);
 * command-to-PWM latency: simulated cycles from the stop bit of a command's last byte
   (UART RXC) to the last motor-output register write, for SET_TWIST, SET_HEADING, STOP;
-* IK match: firmware duty vs ``robot.kinematics.twist_to_wheels`` over random twists.
+* IK match: firmware duty vs ``robot.kinematics.twist_to_wheels`` over random twists;
+* link loss: simulated time from a motion command's last byte to the start of the watchdog
+  ramp and to zero duty on all wheels, from full, half and 10 % duty (requirement: <= 300 ms).
 
 All times are simulated CPU cycles at 16 MHz. Prints a table and one JSON line.
 Run: .venv/bin/python benchmarks/bench_firmware.py
@@ -165,6 +167,23 @@ def latency_and_ik(drive: SerialDrive, board: Board, n: int = 60) -> dict:
     return res
 
 
+def link_loss(drive: SerialDrive, board: Board) -> dict:
+    out = {}
+    for omega, label in ((8.0, "full"), (4.0, "half"), (0.8, "10 %")):   # 8 rad/s turn: every wheel at 20 rad/s
+        n = len(board.pwm)
+        drive.set_twist(0.0, 0.0, omega)
+        deadline = time.monotonic() + 5.0
+        while not (len(board.pwm) > n + 1 and board.pwm[-1][1] == (0, 0, 0)):
+            if time.monotonic() > deadline:
+                raise TimeoutError("watchdog did not stop the motors")
+            time.sleep(0.005)
+        ev = board.pwm[n:]
+        t_cmd = ev[0][2]
+        out[label] = {"duty": ev[0][1][0], "ramp_start_ms": (ev[1][0] - t_cmd) / F_CPU * 1e3,
+                      "zero_ms": (ev[-1][0] - t_cmd) / F_CPU * 1e3}
+    return out
+
+
 def main() -> None:
     missing = [t for t in ("avr-gcc", "avr-size", "avr-nm", "make") if shutil.which(t) is None]
     if missing or not Path("/usr/include/simavr/sim_avr.h").exists():
@@ -176,6 +195,7 @@ def main() -> None:
         with SerialDrive(board.port, SerialDriveConfig(keepalive=None)) as drive:
             parse = parser_cost(drive, board)
             perf = latency_and_ik(drive, board)
+            loss = link_loss(drive, board)
             tel = drive.telemetry()
     finally:
         board.close()
@@ -196,12 +216,16 @@ def main() -> None:
         print(f"  {k:12s} min {r['min']:6d}  median {r['median']:8.0f}  max {r['max']:6d}  (max {r['max'] / 16:.0f} us)")
     print(f"IK match over {perf['n_commands']} random commands: max |duty - python IK| = "
           f"{perf['ik_max_err_counts']:.3f} counts of {P.PWM_TOP} = {perf['ik_max_err_rad_s']:.4f} rad/s")
+    print("link loss (no command after the last one), simulated ms after its last byte:")
+    for k, r in loss.items():
+        print(f"  {k:5s} duty {r['duty']:4d}: ramp starts {r['ramp_start_ms']:6.1f}, all zero {r['zero_ms']:6.1f}")
     print(json.dumps({"bench": "firmware", **size,
                       "parser": parse,
                       "parser_worst_cycles_per_call": max(r["max_cycles_per_call"] for r in parse.values()),
                       "fw_max_parse_cycles": tel.max_parse_cycles, "fw_max_cmd_cycles": tel.max_cmd_cycles,
                       "latency_cycles": {k: perf[k] for k in ("SET_TWIST", "SET_HEADING", "STOP")},
-                      "ik_max_err_counts": perf["ik_max_err_counts"], "ik_max_err_rad_s": perf["ik_max_err_rad_s"]}))
+                      "ik_max_err_counts": perf["ik_max_err_counts"], "ik_max_err_rad_s": perf["ik_max_err_rad_s"],
+                      "link_loss_ms": loss}))
 
 
 if __name__ == "__main__":

@@ -81,7 +81,8 @@ def run(quick: bool = False, out_dir: Path = RESULTS, seed0: int = 0) -> Outcome
     ax.set_xlabel("azimuth (deg)")
     ax.set_ylabel("elevation (deg)")
     ax.set_title("SRP-PHAT map, three simultaneous talkers at 2 m (trial 0)")
-    ax.legend(loc="lower left", fontsize=8)
+    # Below the axes: inside, the legend hid the spurious third map peak (lower left in trial 0).
+    ax.legend(loc="upper center", bbox_to_anchor=(0.5, -0.13), ncol=2, fontsize=8, facecolor="0.6")  # grey: white "+" shows
     ax3 = fig.add_subplot(1, 2, 2, projection="3d")
     A, E = np.meshgrid(az[::3], el[::3])
     ax3.plot_surface(A, E, img[::3, ::3], cmap="viridis", linewidth=0, antialiased=True)

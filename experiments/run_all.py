@@ -72,6 +72,21 @@ def summary_table(outcomes: dict[str, Outcome]) -> str:
     return "\n".join(rows)
 
 
+#: Experiments run on their own (not by run_all): results file -> what it is.
+OTHERS = {
+    "policy_baselines.md": "policy baselines on SSLRescue-v0 (random vs loudest-source heuristic: success, SPL, "
+                           "path length, collisions; `python -m experiments.policy_baselines`)",
+    "listen_while_driving.md": "what listening while driving costs in accuracy, with and without the motors' "
+                               "ego-noise (`python -m experiments.listen_while_driving`)",
+}
+
+
+def _others(out_dir: Path, report: Path) -> str:
+    rel = os.path.relpath(out_dir, report.parent)
+    items = [f"- [{name}]({rel}/{name}): {what}" for name, what in OTHERS.items() if (out_dir / name).exists()]
+    return "\n".join(items) or "(none run yet)"
+
+
 def run_all(quick: bool = False, out_dir: Path | None = None, report: Path | None = None,
             only: tuple[str, ...] | None = None) -> dict[str, Outcome]:
     """Run the experiments and write the report; paths default as in :func:`output_paths`."""
@@ -129,6 +144,10 @@ experiments took {total:.0f} s on one core). Paper: *Search Disaster Victims usi
 {summary_table(outcomes)}
 
 {body}
+
+## Other experiments
+
+{_others(out_dir, report)}
 
 ## Caveats
 

@@ -51,7 +51,7 @@ SELECTION: list[tuple] = [
     ("test", "speech", "fr_june", "asterisk-core-sounds-fr-wav", f"prompts:{AST}/fr_CA_f_June:10",
      CC_BY_SA, "female (credits: June Wallack)", "Canadian French IVR prompts", None),
     ("test", "speech", "it_carlo", "asterisk-core-sounds-it-wav", f"prompts:{AST}/it_IT_m_Carlo:10",
-     "CC-BY-SA-3.0 (Debian copyright lists it-* under the package's CC licenses)", "male (credits: Carlo Flora)",
+     "CC-BY-3.0", "male (credits: Carlo Flora)",
      "Italian IVR prompts", None),
     ("test", "speech", "en_librivox", "pocketsphinx-testdata",
      [f"{PSX}/librivox/sense_and_sensibility_01_austen_64kb-0{k}.wav" for k in (870, 920)],
@@ -62,44 +62,44 @@ SELECTION: list[tuple] = [
      + [f"{WES}/human-old-die-{i}.ogg" for i in (1, 2)],
      "GPL-2+", "female and elderly male (file names)", "pain cries and death screams (game voice acting)", None),
     # ---- machinery: motors, pumps, generators, saws, hammers ---------------------------------
-    ("dev", "machinery", "mining_machinery", "openttd-opensfx", ["opensfx:11"], "CC-BY-3.0", "", "mining machinery (elevator)", None),
-    ("dev", "machinery", "sawmill", "openttd-opensfx", ["opensfx:40"], "CC-BY-3.0", "", "circular saw", None),
+    ("dev", "machinery", "mining_machinery", "openttd-opensfx", ["opensfx:11"], "opensfx", "", "mining machinery (elevator)", None),
+    ("dev", "machinery", "sawmill", "openttd-opensfx", ["opensfx:40"], "opensfx", "", "circular saw", None),
     ("dev", "machinery", "industry_high", "lincity-ng-data", [f"{LIN}/IndustryHigh1.wav"], "GPL-2+", "", "heavy industry", None),
     ("dev", "machinery", "power_coal", "lincity-ng-data", [f"{LIN}/PowerCoalFull.wav"], "GPL-2+", "", "coal power station", None),
-    ("test", "machinery", "jackhammer", "openttd-opensfx", ["opensfx:33"], "CC-BY-3.0", "", "air hammer", None),
-    ("test", "machinery", "chainsaw", "openttd-opensfx", ["opensfx:56"], "CC-BY-3.0", "", "chainsaw", None),
+    ("test", "machinery", "jackhammer", "openttd-opensfx", ["opensfx:33"], "opensfx", "", "air hammer", None),
+    ("test", "machinery", "chainsaw", "openttd-opensfx", ["opensfx:56"], "opensfx", "", "chainsaw", None),
     ("test", "machinery", "industry_light", "lincity-ng-data", [f"{LIN}/IndustryLight1.wav"], "GPL-2+", "", "light industry", None),
     ("test", "machinery", "ore_mine", "lincity-ng-data", [f"{LIN}/OreMine1.wav"], "GPL-2+", "", "ore mine machinery", None),
     ("test", "machinery", "mill", "lincity-ng-data", [f"{LIN}/Mill1.wav"], "GPL-2+", "", "mill", None),
     # ---- engines: vehicles, aircraft ---------------------------------------------------------
-    ("dev", "engine", "truck_start", "openttd-opensfx", ["opensfx:25"], "CC0-1.0", "", "old truck/bus engine start, pull away", None),
-    ("dev", "engine", "propeller_plane", "openttd-opensfx", ["opensfx:8"], "CC-BY-3.0", "", "propeller plane start", None),
-    ("test", "engine", "helicopter", "openttd-opensfx", ["opensfx:24"], "CC-BY-SA-3.0", "", "helicopter", None),
-    ("test", "engine", "modern_bus", "openttd-opensfx", ["opensfx:27"], "CC-BY-3.0", "", "bus approaches and leaves", None),
-    ("test", "engine", "old_bus", "openttd-opensfx", ["opensfx:28"], "CC-BY-3.0", "", "old bus start", None),
+    ("dev", "engine", "truck_start", "openttd-opensfx", ["opensfx:25"], "opensfx", "", "old truck/bus engine start, pull away", None),
+    ("dev", "engine", "propeller_plane", "openttd-opensfx", ["opensfx:8"], "opensfx", "", "propeller plane start", None),
+    ("test", "engine", "helicopter", "openttd-opensfx", ["opensfx:24"], "opensfx", "", "helicopter", None),
+    ("test", "engine", "modern_bus", "openttd-opensfx", ["opensfx:27"], "opensfx", "", "bus approaches and leaves", None),
+    ("test", "engine", "old_bus", "openttd-opensfx", ["opensfx:28"], "opensfx", "", "old bus start", None),
     # ---- alarms, beeps, horns, bells ----------------------------------------------------------
     ("dev", "alarm", "alarm_clock", "sound-theme-freedesktop", [f"{FDS}/alarm-clock-elapsed.oga"], CC_BY_SA, "", "alarm clock", (0.0, 3.5)),
-    ("dev", "alarm", "level_crossing", "openttd-opensfx", ["opensfx:14"], "CC0-1.0", "", "railway level-crossing bell", None),
-    ("dev", "alarm", "factory_whistle", "openttd-opensfx", ["opensfx:3"], "CC-BY-3.0", "", "factory whistle", None),
+    ("dev", "alarm", "level_crossing", "openttd-opensfx", ["opensfx:14"], "opensfx", "", "railway level-crossing bell", None),
+    ("dev", "alarm", "factory_whistle", "openttd-opensfx", ["opensfx:3"], "opensfx", "", "factory whistle", None),
     ("test", "alarm", "phone_ring", "sound-theme-freedesktop",
      [f"{FDS}/phone-incoming-call.oga", f"{FDS}/phone-incoming-call.oga"], "GPL-2+", "", "phone ringing (twice)", None),
     ("test", "alarm", "busy_tone", "sound-theme-freedesktop", [f"{FDS}/phone-outgoing-busy.oga"], "GPL-2+", "", "telephone busy tone", None),
-    ("test", "alarm", "morse_beeps", "openttd-opensfx", ["opensfx:22", "opensfx:22"], "CC-BY-3.0", "", "morse beeps (twice)", None),
-    ("test", "alarm", "ship_horn", "openttd-opensfx", ["opensfx:6"], "CC-BY-3.0", "", "ship horn", None),
+    ("test", "alarm", "morse_beeps", "openttd-opensfx", ["opensfx:22", "opensfx:22"], "opensfx", "", "morse beeps (twice)", None),
+    ("test", "alarm", "ship_horn", "openttd-opensfx", ["opensfx:6"], "opensfx", "", "ship horn", None),
     # ---- knocking, tapping, hammering --------------------------------------------------------
     ("dev", "knock", "blacksmith", "lincity-ng-data", [f"{LIN}/Blacksmith1.wav"], "GPL-2+", "", "hammer on anvil", None),
-    ("test", "knock", "smithy", "openttd-opensfx", ["opensfx:39"], "CC-BY-3.0", "", "hammering in a smithy", None),
+    ("test", "knock", "smithy", "openttd-opensfx", ["opensfx:39"], "opensfx", "", "hammering in a smithy", None),
     ("test", "knock", "mace_club_fist", "wesnoth-1.16-data", [f"{WES}/mace.ogg", f"{WES}/club.ogg", f"{WES}/fist.ogg",
      f"{WES}/mace.ogg", f"{WES}/club.ogg"], "GPL-2+", "", "blunt impacts", None),
     # ---- rubble, crashes, falling debris ----------------------------------------------------
     ("dev", "rubble", "rumble", "wesnoth-1.16-data", [f"{WES}/rumble.ogg"], "GPL-2+", "", "rumbling earth", (0.0, 4.0)),
-    ("dev", "rubble", "crash", "openttd-opensfx", ["opensfx:17", "opensfx:16"], "CC-BY-3.0 / CC0-1.0", "", "crash, dumpster clatter", None),
+    ("dev", "rubble", "crash", "openttd-opensfx", ["opensfx:17", "opensfx:16"], "opensfx", "", "crash, dumpster clatter", None),
     ("test", "rubble", "cave_in", "wesnoth-1.16-data", [f"{WES}/cave-in.ogg"], "GPL-2+", "", "cave-in, falling rocks", None),
-    ("test", "rubble", "big_crash_tree", "openttd-opensfx", ["opensfx:19", "opensfx:54"], "CC-BY-3.0", "", "big crash, tree crashing", None),
+    ("test", "rubble", "big_crash_tree", "openttd-opensfx", ["opensfx:19", "opensfx:54"], "opensfx", "", "big crash, tree crashing", None),
     # ---- wind, fans, steam, hum ----------------------------------------------------------------
-    ("dev", "wind_hum", "wind", "openttd-opensfx", ["opensfx:52"], "CC-BY-3.0", "", "wind", None),
-    ("test", "wind_hum", "heavy_wind", "openttd-opensfx", ["opensfx:57"], "CC-BY-3.0", "", "heavy wind", None),
-    ("test", "wind_hum", "electric_sparking_steam", "openttd-opensfx", ["opensfx:10", "opensfx:13"], "CC-BY-3.0", "",
+    ("dev", "wind_hum", "wind", "openttd-opensfx", ["opensfx:52"], "opensfx", "", "wind", None),
+    ("test", "wind_hum", "heavy_wind", "openttd-opensfx", ["opensfx:57"], "opensfx", "", "heavy wind", None),
+    ("test", "wind_hum", "electric_sparking_steam", "openttd-opensfx", ["opensfx:10", "opensfx:13"], "opensfx", "",
      "electric sparking (Jacob's ladder hum), steam", None),
     # ---- music (instrumental hold music) -----------------------------------------------------
     ("dev", "music", "cold_day", "asterisk-moh-opsound-wav", [f"{MOH}/macroform-cold_day.wav"], CC_BY_SA, "", "instrumental music", (60.0, 4.0)),
@@ -108,6 +108,13 @@ SELECTION: list[tuple] = [
     ("test", "music", "system", "asterisk-moh-opsound-wav", [f"{MOH}/reno_project-system.wav"], CC_BY_SA, "", "instrumental music", (90.0, 4.0)),
 ]
 EXCLUDE_PROMPTS = ("beep", "tone", "monkeys", "silence", "weasels")
+
+
+def _opensfx_name(cat: Path, index: int) -> str:
+    """Entry ``index``'s description in OpenSFX's .cat archive (title, author, license)."""
+    d = cat.read_bytes()
+    off = struct.unpack("<I", d[8 * index: 8 * index + 4])[0] & 0x7FFFFFFF
+    return d[off + 1: off + 1 + d[off]].rstrip(b"\0").decode("latin1")
 
 
 def _opensfx(cat: Path, index: int, tmp: Path) -> Path:
@@ -169,6 +176,10 @@ def main() -> None:
                 _, folder, secs = srcs.split(":")
                 srcs = [str(p.relative_to(base)) for p in _prompts(base / folder, float(secs))]
             inputs, shown = [], []
+            if lic == "opensfx":  # each OpenSFX entry names its own license
+                lic = " / ".join(dict.fromkeys(
+                    _opensfx_name(base / OSFX, int(x.split(":")[1])).split("License: ")[1].split(". ")[0].rstrip(".")
+                    for x in srcs))
             for s in srcs:
                 if s.startswith("opensfx:"):
                     inputs += [str(_opensfx(base / OSFX, int(s.split(":")[1]), tmp))]
@@ -190,13 +201,13 @@ def main() -> None:
                     spec, i = [inputs[i]], i + 1
                 part = tmp / f"{name}_{k}.wav"
                 k += 1
-                subprocess.run(["sox", *spec, "-r", str(FS), "-c", "1", "-b", "16", str(part), "remix", "-", "rate", "-v",
+                subprocess.run(["sox", "-D", *spec, "-r", str(FS), "-c", "1", "-b", "16", str(part), "remix", "-", "rate", "-v",
                                 str(FS)], check=True)
                 parts.append(str(part))
             out = OUT / split / cat / f"{name}.wav"
             out.parent.mkdir(parents=True, exist_ok=True)
             effects = ["trim", str(trim[0]), str(trim[1])] if trim else []
-            subprocess.run(["sox", *parts, str(out), *effects, "norm", "-1"], check=True)
+            subprocess.run(["sox", "-D", *parts, str(out), *effects, "norm", "-1"], check=True)
             fs, x = wavfile.read(out)
             if sex == "F0":
                 f0 = median_f0(x)
@@ -207,7 +218,7 @@ def main() -> None:
     (OUT / "PROVENANCE").write_text(
         "# Real recordings for the voice-activity detector (scripts/build_sound_dataset.py writes this file).\n"
         "# All from Debian bookworm packages (main); licenses as in each package's copyright file.\n"
-        "# 16 kHz mono 16-bit WAV, peak-normalised to -1 dBFS; IVR prompts are 8 kHz recordings upsampled.\n"
+        "# 16 kHz mono 16-bit WAV (sox, no dither: reproducible), peak-normalised to -1 dBFS; IVR prompts are 8 kHz\n# recordings upsampled.\n"
         + "\n".join(rows) + "\n")
 
 

@@ -67,3 +67,38 @@ def chunk_starts(rec: Recording) -> list[int]:
         if (frac >= _SPEECH_ACTIVE) if rec.is_speech else (frac > 0):
             starts.append(s)
     return starts
+
+
+# The five room configurations tried while developing the hearing (all kept): talker, machine (test
+# part), their azimuths (deg, array frame); both 2 m from the array centre, at its height.
+ROOM_CASES = [("it_carlo", "ore_mine", 30, -50), ("fr_june", "industry_light", 120, 40),
+              ("en_librivox", "jackhammer", -100, 0), ("it_carlo", "mill", 170, 90), ("fr_june", "ore_mine", 0, -70)]
+
+
+def room_case(talker: str, machine: str, az_t: float, az_m: float, seconds: int = 16, sir_db: float = -6.0,
+              rt60_s: float = 0.6):
+    """The cube array in a 7 x 6 x 3.2 m room of ``rt60_s`` (ssl_sim), a talker (test part, looped) and a
+    machine recording ``-sir_db`` dB louder (talker level = RMS while talking, machine = RMS), 2 m away.
+    Returns (int16 (8, n) audio, the two true unit directions (array frame), per 1 s: does she talk?)."""
+    from ssl_sim.acoustics import AcousticConfig, AcousticSimulator, RobotPose
+    from ssl_sim.acoustics.pose import ArrayMount
+    from ssl_sim.acoustics.signals import LoopedSignal
+    from ssl_sim.acoustics.sources import SoundSource
+    from ssl_sim.world import Room, World
+
+    rec = {r.name: r for r in recordings("test")}
+    pose, mount = RobotPose(3.5, 3.0, yaw=0.0), ArrayMount()
+    c = mount.centre_world(pose)
+    dirs = [np.array([np.cos(np.deg2rad(a)), np.sin(np.deg2rad(a)), 0.0]) for a in (az_t, az_m)]
+    speech = rec[talker].samples
+    fr = speech[: len(speech) // _FRAME * _FRAME].reshape(-1, _FRAME)
+    e = 10 * np.log10((fr**2).mean(1) + 1e-12)
+    talking = e >= e.max() - _ACTIVE_DB
+    active_rms = np.sqrt((fr[talking] ** 2).mean())
+    srcs = [SoundSource(tuple(c + 2.0 * dirs[0]), LoopedSignal(speech / active_rms, FS, normalise=False), 62.0),
+            SoundSource(tuple(c + 2.0 * dirs[1]), LoopedSignal(rec[machine].samples, FS), 62.0 - sir_db)]
+    sim = AcousticSimulator(World(room=Room((7.0, 6.0, 3.2))), AcousticConfig(rt60_s=rt60_s, seed=1), srcs)
+    x = sim.listen_pose(pose, float(seconds), mount=mount)
+    per_s = FS // _FRAME
+    she_talks = [bool(talking[np.arange(w * per_s, (w + 1) * per_s) % len(talking)].mean() >= 0.5) for w in range(seconds)]
+    return x, dirs, she_talks

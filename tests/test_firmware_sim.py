@@ -2,8 +2,13 @@
 
 firmware/sim/simdrive runs the compiled firmware, bridges UART0 to a pseudo-terminal and
 prints the motor outputs (PWM compare registers + direction pins) with their simulated
-cycle; its ideal motor model feeds quadrature edges back. Expected values come from the
-Python kinematics (robot.kinematics) and the protocol spec, never from the firmware.
+cycle; its ideal motor model feeds quadrature edges back, a virtual MPU-6050 answers on the
+I2C bus and the bumper pins follow the test's commands (on the harness's stdin). Expected
+values come from the Python kinematics (robot.kinematics), the protocol spec and the values
+the test injects, never from the firmware.
+
+Timing is judged in simulated cycles, and waits are for simulated time (the harness's ENC
+reports every 50 ms), so a host slowed by CPU load cannot change a result.
 """
 from __future__ import annotations
 
@@ -20,7 +25,13 @@ import numpy as np
 import pytest
 
 from robot import protocol as P
-from robot.hardware.serial_drive import COUNTS_PER_REV, DriveCommandError, SerialDrive, SerialDriveConfig
+from robot.hardware.serial_drive import (
+    COUNTS_PER_REV,
+    DriveCommandError,
+    DriveLinkError,
+    SerialDrive,
+    SerialDriveConfig,
+)
 from robot.kinematics import OmniDriveParams, twist_to_wheels
 
 FW = Path(__file__).resolve().parents[1] / "firmware"
@@ -59,7 +70,7 @@ class SimBoard:
     """One simulated board: the harness process and its parsed stdout."""
 
     def __init__(self, *args: str):
-        self.proc = subprocess.Popen([str(SIM), "--cpr", str(COUNTS_PER_REV), *args, str(ELF)],
+        self.proc = subprocess.Popen([str(SIM), "--cpr", str(COUNTS_PER_REV), *args, str(ELF)], stdin=subprocess.PIPE,
                                      stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
         first = self.proc.stdout.readline().split()
         assert first and first[0] == "PTY", f"harness did not start: {first} {self.proc.stderr.read()}"
@@ -67,6 +78,7 @@ class SimBoard:
         self.pwm: list[PwmEvent] = []
         self.enc: list[tuple[int, tuple[int, int, int]]] = []
         self.wdt: list[tuple[int, int]] = []
+        self.acks: list[list[str]] = []            # RXQUEUED / RXDONE / BUMP / GYRO lines
         self._reader = threading.Thread(target=self._read, daemon=True)
         self._reader.start()
 
@@ -81,8 +93,30 @@ class SimBoard:
                 self.enc.append((int(f[1]), tuple(int(x) for x in f[2:5])))
             elif f[:1] == ["WDT"]:
                 self.wdt.append((int(f[1]), int(f[2])))
+            elif f[:1] in (["RXQUEUED"], ["RXDONE"], ["BUMP"], ["GYRO"]):
+                self.acks.append(f)
 
-    def wait_pwm(self, n_before: int, timeout: float = 1.0) -> PwmEvent:
+    def command(self, line: str, ack: str, timeout: float = 5.0) -> int:
+        """Send a harness command; the simulated cycle of its ``ack`` line (e.g. RXDONE)."""
+        n = len(self.acks)
+        self.proc.stdin.write(line + "\n")
+        self.proc.stdin.flush()
+        deadline = time.monotonic() + timeout
+        while True:
+            for f in self.acks[n:]:
+                if f[0] == ack:
+                    return int(f[1])
+            assert time.monotonic() < deadline, f"harness did not answer {line[:20]!r} with {ack}"
+            time.sleep(0.002)
+
+    def wait_sim(self, cycle: int, timeout: float = 10.0) -> None:
+        """Wait until the simulation has passed ``cycle`` (by its 50 ms ENC reports)."""
+        deadline = time.monotonic() + timeout
+        while not self.enc or self.enc[-1][0] < cycle:
+            assert time.monotonic() < deadline, "simulation stalled"
+            time.sleep(0.005)
+
+    def wait_pwm(self, n_before: int, timeout: float = 10.0) -> PwmEvent:
         """The first PWM event after the first ``n_before`` ones."""
         deadline = time.monotonic() + timeout
         while len(self.pwm) <= n_before:
@@ -107,6 +141,12 @@ class SimBoard:
             self.proc.kill()
 
 
+def steady(**kw) -> SerialDriveConfig:
+    """A host that never resends: on a loaded machine a resend is one more frame in the MCU's counters
+    and restarts its command watchdog behind the test's back; a reply may take up to 5 s instead."""
+    return SerialDriveConfig(reply_timeout=5.0, retries=0, **kw)
+
+
 @pytest.fixture(scope="module")
 def built():
     r = subprocess.run(["make", "-C", str(FW), "all", "sim"], capture_output=True, text=True, timeout=300)
@@ -123,7 +163,7 @@ def board(built):
 
 @pytest.fixture
 def drive(board):
-    d = SerialDrive(board.port, SerialDriveConfig(keepalive=None, connect_timeout=3.0))
+    d = SerialDrive(board.port, steady(keepalive=None))
     board.settle()
     yield d
     d.close()
@@ -145,6 +185,8 @@ def test_firmware_constants_match_python(built):
     assert val["MAX_WHEEL_SPEED"] == pytest.approx(p.max_wheel_speed)
     assert val["PWM_TOP"] == P.PWM_TOP
     assert val["CMD_TIMEOUT_MS"] / 1000 == pytest.approx(P.COMMAND_TIMEOUT_S)
+    assert val["STOP_DEADLINE_MS"] / 1000 == pytest.approx(P.STOP_DEADLINE_S)
+    assert val["GYRO_LSB_PER_DPS_X10"] / 10 * 180 / math.pi == pytest.approx(P.GYRO_COUNTS_PER_RAD_S)
     assert val["ENC_WINDOW_MS"] / 1000 == pytest.approx(P.ENCODER_WINDOW_S)
     proto = (FW / "src" / "protocol.h").read_text()
     for t in P.MsgType:
@@ -158,46 +200,52 @@ def test_ping_round_trip(board, drive):
     rtt = drive.ping(0x12345678)
     pong = drive.board
     assert pong.nonce == 0x12345678 and pong.protocol_version == P.PROTOCOL_VERSION
-    assert pong.firmware_version == 0x0100 and pong.pwm_top == P.PWM_TOP
-    assert 0 < rtt < 0.1
-    up0 = pong.uptime_ms
-    time.sleep(0.05)
+    assert pong.firmware_version == 0x0200 and pong.pwm_top == P.PWM_TOP
+    assert rtt > 0
+    # the MCU's millisecond clock (T0 configuration) keeps simulated time: compare with the harness's cycles
+    board.wait_sim(1)
+    c0 = board.enc[-1][0]
     drive.ping()
-    assert drive.board.uptime_ms >= up0 + 40          # the MCU clock runs ~ in step with ours
+    up = drive.board.uptime_ms
+    board.wait_sim(board.enc[-1][0] + 1)                # a report after the reply
+    assert c0 / F_CPU * 1000 - 1 <= up <= board.enc[-1][0] / F_CPU * 1000
 
 
-def test_twist_and_heading_pwm_match_python_ik(board, drive):
-    cases = [
-        ("twist", (0.20, 0.0, 0.0)),
-        ("twist", (0.0, -0.15, 0.0)),
-        ("twist", (0.0, 0.0, 1.2)),
-        ("twist", (0.3, 0.1, -0.8)),
-        ("twist", (-0.25, 0.2, 0.5)),
-        ("twist", (2.0, 1.0, 3.0)),                     # saturates: scaled to 20 rad/s, direction kept
-        ("heading", (math.radians(-4.0), 0.3)),         # the paper's azimuth command
-        ("heading", (math.radians(145.0), 0.5)),
-        ("heading", (math.radians(-135.0), 0.4)),
-    ]
-    worst = 0.0
-    for kind, args in cases:
-        n = len(board.pwm)
-        if kind == "twist":
-            drive.set_twist(*args)
-            twist = args
-        else:
-            drive.set_heading(*args)
-            az = round(args[0] * 1000) / 1000             # what went over the wire (mrad, mm/s)
-            twist = (args[1] * math.cos(az), args[1] * math.sin(az), 0.0)
-        ev = board.wait_pwm(n)
-        want = expected_duty(twist)
-        err = np.abs(np.array(ev.duty) - want)
-        worst = max(worst, float(err.max()))
-        assert err.max() <= 0.51, f"{kind}{args}: firmware {ev.duty}, python IK {np.round(want, 2)}"
-        assert np.all(np.sign(ev.duty) == np.sign(np.round(want))), (ev.duty, want)
-        limited = bool(drive.telemetry().faults & P.Fault.SPEED_LIMITED)
-        assert limited == (np.abs(twist_to_wheels(twist) - OmniDriveParams().jacobian @ twist).max() > 1e-9)
-    drive.stop()
-    print(f"worst |duty - IK| = {worst:.3f} counts of {P.PWM_TOP}")
+def test_twist_and_heading_pwm_match_python_ik(board, built):
+    # keepalive on, a stop after each case: a host starved by CPU load for 200 ms gets its motors ramped
+    # down (as it should), which must not look like the next command's output
+    with SerialDrive(board.port, steady(keepalive=0.1)) as drive:
+        cases = [
+            ("twist", (0.20, 0.0, 0.0)),
+            ("twist", (0.0, -0.15, 0.0)),
+            ("twist", (0.0, 0.0, 1.2)),
+            ("twist", (0.3, 0.1, -0.8)),
+            ("twist", (-0.25, 0.2, 0.5)),
+            ("twist", (2.0, 1.0, 3.0)),                     # saturates: scaled to 20 rad/s, direction kept
+            ("heading", (math.radians(-4.0), 0.3)),         # the paper's azimuth command
+            ("heading", (math.radians(145.0), 0.5)),
+            ("heading", (math.radians(-135.0), 0.4)),
+        ]
+        worst = 0.0
+        for kind, args in cases:
+            n = board.settle()
+            if kind == "twist":
+                drive.set_twist(*args)
+                twist = args
+            else:
+                drive.set_heading(*args)
+                az = round(args[0] * 1000) / 1000             # what went over the wire (mrad, mm/s)
+                twist = (args[1] * math.cos(az), args[1] * math.sin(az), 0.0)
+            ev = board.wait_pwm(n)
+            want = expected_duty(twist)
+            err = np.abs(np.array(ev.duty) - want)
+            worst = max(worst, float(err.max()))
+            assert err.max() <= 0.51, f"{kind}{args}: firmware {ev.duty}, python IK {np.round(want, 2)}"
+            assert np.all(np.sign(ev.duty) == np.sign(np.round(want))), (ev.duty, want)
+            limited = np.abs(twist_to_wheels(twist) - OmniDriveParams().jacobian @ twist).max() > 1e-9
+            assert drive.speed_limited == limited      # the ACK's flag
+            drive.stop()
+        print(f"worst |duty - IK| = {worst:.3f} counts of {P.PWM_TOP}")
 
 
 def test_stop_acts_at_once(board, drive):
@@ -213,38 +261,87 @@ def test_stop_acts_at_once(board, drive):
     assert len(board.pwm) == n + 1
 
 
-def test_keepalive_holds_and_watchdog_ramps_down(board, built):
-    with SerialDrive(board.port, SerialDriveConfig(keepalive=0.1)) as d:
+def test_keepalive_holds_a_refreshed_command(board, built):
+    with SerialDrive(board.port, steady(keepalive=0.1)) as d:
         n = board.settle()
         d.set_twist(0.0, 0.0, 4.0)                     # all wheels +10 rad/s: duty 200
-        time.sleep(0.6)                                # twice the watchdog time, kept alive
-        assert [e.duty for e in board.pwm[n:]] == [(200, 200, 200)]
-        assert not d.status().faults
+        sent = [time.monotonic()]
+        for _ in range(12):                            # a control loop refreshing it every 50 ms
+            time.sleep(0.05)
+            d.set_twist(0.0, 0.0, 4.0)
+            sent.append(time.monotonic())
+        events = [e.duty for e in board.pwm[n:]]
         d.stop()
+    # Simulated time never runs ahead of wall time, so a host that got a command out at least every
+    # 190 ms of wall time cannot have let the 200 ms watchdog trip. A host starved for longer (a heavily
+    # loaded machine) rightly gets its motors ramped down: nothing to judge then.
+    gap = float(np.diff(sent).max())
+    if gap > 0.19 and events != [(200, 200, 200)]:
+        pytest.skip(f"host starved for {gap:.2f} s between commands (CPU load): the watchdog rightly acted")
+    assert events == [(200, 200, 200)]
 
-    with SerialDrive(board.port, SerialDriveConfig(keepalive=None)) as d:
+
+def _wait_zero(board, n: int, timeout: float = 20.0) -> list[PwmEvent]:
+    deadline = time.monotonic() + timeout
+    while not (len(board.pwm) > n + 1 and board.pwm[-1].duty == (0, 0, 0)):
+        assert time.monotonic() < deadline, "motors not stopped"
+        time.sleep(0.01)
+    return board.pwm[n:]
+
+
+def test_link_loss_stops_full_duty_within_300ms(board, built):
+    """Issue 14: from full duty, all three PWM duties reach 0 within 300 ms of the last valid command."""
+    with SerialDrive(board.port, steady(keepalive=None)) as d:
         n = board.settle()
-        d.set_twist(0.0, 0.0, -4.0)
-        deadline = time.monotonic() + 5.0              # no command for > 300 ms + 50 ms ramp
-        while not (len(board.pwm) > n + 1 and board.pwm[-1].duty == (0, 0, 0)):
-            assert time.monotonic() < deadline, "motors not ramped down"
-            time.sleep(0.02)
-        ev = board.pwm[n:]
-        assert ev[0].duty == (-200, -200, -200)
-        t_cmd = ev[0].rx_cycle
+        d.set_twist(0.0, 0.0, -8.0)                    # every wheel at -20 rad/s: full duty
+        ev = _wait_zero(board, n)
+        assert ev[0].duty == (-400, -400, -400)
+        t_cmd = ev[0].rx_cycle                          # stop bit of the command's last byte
         ramp = ev[1:]
-        assert ramp and ramp[-1].duty == (0, 0, 0)
         start = (ramp[0].cycle - t_cmd) / F_CPU
-        assert 0.300 <= start <= 0.3015, start         # ramp begins 300..301 ms (1 ms tick) after it
-        mags = [abs(e.duty[0]) for e in ramp]
-        assert mags == list(range(196, -1, -4))       # 4 counts per ms down to zero
-        steps = np.diff([e.cycle for e in ramp]) / F_CPU
-        assert np.allclose(steps, 0.001, atol=6e-5)    # tick ISR latency jitter (<1000 cycles)
-        st = d.status()
-        assert "cmd_timeout" in st.faults
+        end = (ramp[-1].cycle - t_cmd) / F_CPU
+        assert 0.200 <= start <= 0.2015, start         # ramp begins 200..201 ms (1 ms tick) after it
+        assert end <= P.STOP_DEADLINE_S, end           # ... and every duty is zero by 300 ms
+        assert all(e.duty[0] == e.duty[1] == e.duty[2] for e in ramp)   # in proportion: direction kept
+        mags = [-e.duty[0] for e in ramp]
+        assert mags == sorted(mags, reverse=True) and len(mags) >= 80   # a ramp (1 ms steps), not a jump
+        assert "cmd_timeout" in d.status().faults
         d.set_twist(0.1, 0.0, 0.0)                     # the next command clears it
         assert "cmd_timeout" not in d.status().faults
         d.stop()
+    print(f"link loss at full duty: ramp {start * 1e3:.1f} ms .. zero {end * 1e3:.1f} ms after the last command")
+
+
+def test_hung_control_loop_stops_the_robot(board, built):
+    """Issue 14: with the keepalive running, a control loop that stops refreshing its command stops the
+    motors within command_deadline + 300 ms (the keepalive never drives on for a hung application)."""
+    deadline_s = 0.6
+    with SerialDrive(board.port, steady(keepalive=0.1, command_deadline=deadline_s)) as d:
+        n = board.settle()
+        t_set = time.monotonic()
+        d.set_twist(0.0, 0.0, 4.0)                     # duty 200; then the "loop" hangs (keepalive thread alive)
+        ev = _wait_zero(board, n)
+        assert ev[0].duty == (200, 200, 200)
+        held = (ev[-1].cycle - ev[0].rx_cycle) / F_CPU
+        assert held <= deadline_s + P.STOP_DEADLINE_S, held
+        # kept alive past the MCU's own 200 ms, then the host's STOP at the deadline (a keepalive thread
+        # starved by CPU load for 200 ms lets the watchdog ramp first: the bound above holds either way)
+        while d.stats.deadline_stops == 0:
+            assert time.monotonic() < t_set + 20.0, "the keepalive never gave up the command"
+            time.sleep(0.01)
+        assert d.stats.deadline_stops == 1 and time.monotonic() - t_set > deadline_s
+        m = board.settle()
+        d.set_twist(0.0, 0.0, 4.0)                     # a live loop drives again
+        assert board.wait_pwm(m).duty == (200, 200, 200)
+        d.stop()
+    print(f"hung loop: motors at zero {held * 1e3:.0f} ms after the last application command "
+          f"(deadline {deadline_s * 1e3:.0f} ms)")
+
+
+def test_second_opener_of_the_port_is_refused(board, drive):
+    with pytest.raises(DriveLinkError, match=rf"{re.escape(board.port)}.*in use by another program"):
+        SerialDrive(board.port, steady(keepalive=None))
+    drive.ping()                                       # the first one is unaffected
 
 
 def test_garbage_and_corrupt_frames_are_rejected_and_counted(board, drive):
@@ -288,7 +385,7 @@ def test_garbage_and_corrupt_frames_are_rejected_and_counted(board, drive):
 
 
 @pytest.mark.parametrize("seed", [2024, 7, 99])
-def test_firmware_parser_agrees_with_python_reference_on_random_streams(board, drive, seed):
+def test_firmware_parser_agrees_with_python_reference_on_random_streams(board, built, seed):
     """Differential test: a random mix of commands, garbage (with start bytes) and damaged
     frames must leave the MCU's counters exactly where the Python reference parser says."""
     rng = np.random.default_rng(seed)
@@ -315,26 +412,26 @@ def test_firmware_parser_agrees_with_python_reference_on_random_streams(board, d
     ref = P.FrameParser(max_payload=P.MCU_MAX_PAYLOAD)
     frames = ref.feed(bytes(stream))
     assert ref.pending == 0
-    # The comparison presumes a gap-free line. A pause of more than the 5 ms inter-byte timeout
-    # (the host or the pty stalling under load; seen about once in two full-file runs on a fresh
-    # clone) shows as an MCU timeout that the untimed reference cannot have: such an attempt says
-    # nothing about the parser, so it is repeated (at most 3 attempts), never relaxed.
     assert ref.timeouts == 0
-    for _attempt in range(3):
+    # Deterministic under CPU load (issue 14 item 10; it used to fail about once per loaded run):
+    # - the stream goes in through the harness (RX command), which puts it on the simulated line
+    #   back-to-back in *simulated* time. Written to the pty, bytes reached the simulation at
+    #   wall-clock moments, so a host stall of > 5 ms mid-stream was an MCU inter-byte timeout;
+    # - that alone still failed 4 of 10 loaded runs, with spurious MCU timeouts on a gap-free
+    #   line: the firmware compared the last byte's tick with a "now" read before a long rescan
+    #   (fixed in link_poll, a real bug that dropped valid frames);
+    # - no resends from the host (each is one more frame): a reply may take up to 5 s.
+    with SerialDrive(board.port, steady(keepalive=None)) as drive:
+        board.settle()
         t0 = drive.telemetry()
-        drive._ser.write(bytes(stream))
-        drive._ser.flush()
-        # line time + replies + inter-byte timeout, with margin for a simulated board lagging under CPU load
-        time.sleep(len(stream) * 11 / 117647 + 1.5)
+        done = board.command("RX " + bytes(stream).hex(), "RXDONE")
+        board.wait_sim(done + int(0.05 * F_CPU))        # the MCU has parsed it all and sent its replies
         drive.stop()
         t1 = drive.telemetry()
-        if (t1.timeouts - t0.timeouts) % 65536 == 0:
-            break
     assert t1.rx_overflows == t0.rx_overflows           # the MCU never stalls its receive path
-    for field, want in [("crc_errors", ref.crc_errors), ("length_errors", ref.length_errors),
-                        ("dropped_bytes", ref.dropped_bytes), ("timeouts", ref.timeouts),
-                        ("rx_frames", len(frames) + 2)]:
-        assert (getattr(t1, field) - getattr(t0, field)) % 65536 == want, field
+    want = {"crc_errors": ref.crc_errors, "length_errors": ref.length_errors, "dropped_bytes": ref.dropped_bytes,
+            "timeouts": ref.timeouts, "rx_frames": len(frames) + 2}
+    assert {f: (getattr(t1, f) - getattr(t0, f)) % 65536 for f in want} == want
     assert ref.crc_errors > 5 and ref.length_errors > 3 and len(frames) > 15
 
 
@@ -349,7 +446,7 @@ def test_nak_reasons(board, drive):
     # a CRC-valid SET_TWIST with a 2-byte payload
     seq = 99
     drive._write(P.build_frame(P.MsgType.SET_TWIST, seq, b"\x00\x01"))
-    reply = drive._await_reply(seq, time.monotonic() + 0.5)
+    reply = drive._await_reply(P.MsgType.SET_TWIST, seq, P.MsgType.ACK, time.monotonic() + 0.5)
     assert reply == P.Nak(P.MsgType.SET_TWIST, P.NakReason.BAD_LENGTH)
     assert drive.telemetry().naks >= 3
 
@@ -357,13 +454,15 @@ def test_nak_reasons(board, drive):
 def test_encoders_and_odometry_follow_the_wheels(board, built):
     params = OmniDriveParams()
     twist = (0.15, -0.1, 0.6)
-    with SerialDrive(board.port, SerialDriveConfig(keepalive=0.1)) as d:
+    with SerialDrive(board.port, steady(keepalive=0.1)) as d:
         a0 = d.odometry().wheel_angles
         d.set_twist(*twist)
-        time.sleep(0.5)
+        for _ in range(10):                             # a control loop, 0.5 s
+            time.sleep(0.05)
+            d.set_twist(*twist)
         odo = d.odometry()
         t = d.telemetry()
-        time.sleep(0.12)                                # keep moving past the model's next report
+        board.wait_sim(int((t.uptime_ms / 1000 + 0.06) * F_CPU))   # keep moving past the model's next report
         d.stop()
     k = 2 * np.pi / COUNTS_PER_REV
     want = twist_to_wheels(twist, params)
@@ -390,24 +489,105 @@ def test_hardware_watchdog_is_enabled_and_kept(board, drive):
     assert wdtcsr & 0x08, f"WDE not set: WDTCSR=0x{wdtcsr:02X}"
     assert (wdtcsr & 0x07) | ((wdtcsr >> 5 & 1) << 3) == 3, "expected the 120 ms prescaler"
     up0 = drive.telemetry().uptime_ms
-    time.sleep(0.3)
+    board.wait_sim(int((up0 / 1000 + 0.3) * F_CPU))    # 300 ms of simulated time, 2.5 watchdog periods
     t = drive.telemetry()
-    assert t.uptime_ms >= up0 + 250                  # no watchdog reset in between
+    assert t.uptime_ms >= up0 + 300                  # no watchdog reset in between
     assert not t.faults & P.Fault.WDT_RESET
 
 
 def test_stalled_wheel_is_reported(built):
     b = SimBoard("--stall", "1")
     try:
-        with SerialDrive(b.port, SerialDriveConfig(keepalive=0.1)) as d:
+        with SerialDrive(b.port, steady(keepalive=0.1)) as d:
             d.set_twist(0.0, 0.0, 3.0)                 # every wheel at 7.5 rad/s: 37.5 % duty
             assert not d.status().stalled
-            deadline = time.monotonic() + 5.0
+            deadline = time.monotonic() + 20.0
             while not (st := d.status()).stalled:       # 500 ms without an edge (simulated time)
                 assert time.monotonic() < deadline, "stall not reported"
                 time.sleep(0.05)
+                d.set_twist(0.0, 0.0, 3.0)             # a control loop refreshes its command
             assert not st.ok
             tel = d.telemetry()
             assert tel.encoder_counts[1] == 0 and tel.encoder_counts[0] > 0
     finally:
         b.close()
+
+
+# --------------------------------------------------------------------------- sensors (issue 13)
+def _counts(rad_s: float) -> int:
+    return round(rad_s * P.GYRO_COUNTS_PER_RAD_S)
+
+
+def test_gyro_yaw_rate_reaches_status(board, built):
+    """The firmware reads the virtual MPU-6050 over I2C; SerialDrive.status returns its yaw rate in rad/s
+    with the zero-rate bias, read while the robot stands still, removed."""
+    bias = 0.031                                       # rad/s (the MPU-6050 allows +-20 deg/s = 0.35 rad/s)
+    with SerialDrive(board.port, steady(keepalive=0.1)) as d:
+        board.settle()
+        c = board.command(f"GYRO {bias}", "GYRO")
+        board.wait_sim(c + int(0.12 * F_CPU))           # a full 50 ms window with the new value
+        t = d.telemetry()
+        assert t.gyro_ok and abs(t.gyro_z - _counts(bias)) <= 1, t.gyro_z
+        assert d.gyro_bias == pytest.approx(bias, abs=1.01 / P.GYRO_COUNTS_PER_RAD_S)
+        assert abs(d.status().yaw_rate) <= 1.01 / P.GYRO_COUNTS_PER_RAD_S
+        for rate in (0.8, -1.5, 5.0):                  # CCW positive; 5 rad/s = 286 deg/s of the +-500 range
+            d.set_twist(0.0, 0.0, rate)
+            c = board.command(f"GYRO {rate + bias}", "GYRO")
+            board.wait_sim(c + int(0.12 * F_CPU))
+            st = d.status()
+            # one count of quantisation each for the reading and the bias
+            assert st.yaw_rate == pytest.approx(rate, abs=2.01 / P.GYRO_COUNTS_PER_RAD_S), rate
+        assert d.gyro_bias == pytest.approx(bias, abs=1.01 / P.GYRO_COUNTS_PER_RAD_S)   # not learned while moving
+        d.stop()
+        board.command("GYRO 0", "GYRO")
+
+
+def test_board_without_gyro_reports_none(built):
+    b = SimBoard("--no-gyro")
+    try:
+        with SerialDrive(b.port, steady(keepalive=None)) as d:
+            b.wait_sim(int(0.1 * F_CPU))
+            t = d.telemetry()
+            assert not t.gyro_ok and t.gyro_z == 0
+            st = d.status()
+            assert st.yaw_rate is None and st.ok
+    finally:
+        b.close()
+
+
+def test_bumpers_reach_status(board, drive):
+    assert not drive.status().bumper
+    c = board.command("BUMP 5", "BUMP")                 # PC0 and PC2 pressed
+    board.wait_sim(c + int(0.05 * F_CPU))
+    assert drive.telemetry().bumpers & P.BUMPERS_LIVE == 0b0101
+    assert drive.status().bumper
+    c = board.command("BUMP 0", "BUMP")
+    board.wait_sim(c + int(0.05 * F_CPU))
+    assert drive.telemetry().bumpers & P.BUMPERS_LIVE == 0
+    assert drive.status().bumper                       # it was pressed since the previous status ...
+    assert not drive.status().bumper                   # ... and is not now
+    # a 20 ms tap between two polls is not lost
+    c = board.command("BUMP 2 20", "BUMP")
+    board.wait_sim(c + int(0.1 * F_CPU))
+    assert drive.telemetry().bumpers & P.BUMPERS_LIVE == 0
+    assert drive.status().bumper
+    assert not drive.status().bumper
+    # contact bounce shorter than the 5 ms debounce time is not a press
+    c = board.command("BUMP 8 3", "BUMP")
+    board.wait_sim(c + int(0.05 * F_CPU))
+    assert not drive.status().bumper
+
+
+def test_gyro_unplugged_and_plugged_back_is_found_again(board, drive):
+    """A gyro that stops answering is reported gone at once and re-probed (and reconfigured) every second."""
+    c = board.command("GYRO 1.25", "GYRO")
+    board.wait_sim(c + int(0.12 * F_CPU))
+    assert drive.telemetry().gyro_ok
+    c = board.command("GYRO unplug", "GYRO")
+    board.wait_sim(c + int(0.02 * F_CPU))              # the next 5 ms read fails
+    assert drive.status().yaw_rate is None
+    c = board.command("GYRO plug", "GYRO")             # powered up afresh: asleep, default full scale
+    board.wait_sim(c + int(1.2 * F_CPU))               # <= 1 s to the next probe, then one 50 ms window
+    t = drive.telemetry()
+    assert t.gyro_ok and abs(t.gyro_z - _counts(1.25)) <= 1   # woken and set to +-500 deg/s again
+    board.command("GYRO 0", "GYRO")

@@ -18,7 +18,13 @@ from hypothesis import HealthCheck, given, settings
 from hypothesis import strategies as st
 
 from robot import protocol as P
-from robot.hardware.serial_drive import DriveCommandError, DriveLinkError, SerialDrive, SerialDriveConfig
+from robot.hardware.serial_drive import (
+    DriveCommandError,
+    DriveLinkError,
+    DriveProtocolError,
+    SerialDrive,
+    SerialDriveConfig,
+)
 
 SETTINGS = settings(derandomize=True, max_examples=150, deadline=None,
                     suppress_health_check=[HealthCheck.too_slow])
@@ -171,6 +177,33 @@ def test_truncated_frame_is_rejected_and_the_rest_recovered(frames, data):
     assert got == frames[:k] + frames[k + 1:]
 
 
+@SETTINGS
+@given(data=st.binary(max_size=600), cuts=st.lists(st.integers(0, 600), max_size=8),
+       sof_density=st.floats(0, 0.5), max_payload=st.sampled_from([P.MCU_MAX_PAYLOAD, P.MAX_PAYLOAD]))
+def test_fuzz_parser_accounts_for_every_byte(data, cuts, sof_density, max_payload):
+    """Fuzz (hypothesis, bounded: <= 150 derandomized examples of <= 600 bytes): every input byte ends up
+    in exactly one place: a frame, a skipped byte, or a start byte rejected for length, CRC or timeout."""
+    rng = np.random.default_rng(len(data))
+    raw = np.frombuffer(data, dtype=np.uint8).copy()
+    raw[rng.random(raw.size) < sof_density] = P.SOF        # start bytes everywhere: the resync paths
+    parser = P.FrameParser(max_payload=max_payload)
+    frames, prev = [], 0
+    for c in sorted({min(c, raw.size) for c in cuts}) + [raw.size]:
+        frames += parser.feed(raw[prev:c].tobytes())
+        prev = c
+    frames += parser.drop_partial()
+    used = sum(P.HEADER_LEN + len(f.payload) + P.CRC_LEN for f in frames)
+    rejected = parser.length_errors + parser.crc_errors + parser.timeouts
+    assert used + parser.dropped_bytes + rejected == raw.size and parser.pending == 0
+    assert parser.frames == len(frames)
+    for f in frames:
+        assert len(f.payload) <= max_payload
+        try:
+            f.decode()                                     # a valid message, or a ProtocolError naming why
+        except P.ProtocolError as e:
+            assert "payload must be" in str(e) or "unknown message type" in str(e)
+
+
 def test_parser_counts_resync_events():
     good = P.encode(P.Ping(1), 1)
     bad_crc = bytearray(P.encode(P.Ping(2), 2))
@@ -193,6 +226,9 @@ class FakeMCU(threading.Thread):
         self.drop_next = 0              # ignore this many frames (lost replies)
         self.garbage = b""              # sent before every reply
         self.stale_first = False        # send a reply with a wrong seq before the right one
+        self.foreign_nak_first = False  # send a NAK for another message type with the same seq first
+        self.version = P.PROTOCOL_VERSION
+        self.arrived: list[float] = []  # monotonic arrival time of each received frame
         self.telemetry = P.Telemetry()
         self.running = True
         self.start()
@@ -213,6 +249,8 @@ class FakeMCU(threading.Thread):
         out = self.garbage
         if self.stale_first:
             out += P.encode(msg, (seq + 1) & 0xFF)
+        if self.foreign_nak_first:
+            out += P.encode(P.Nak(P.MsgType.SET_HEADING, P.NakReason.BAD_VALUE), seq)
         os.write(self.fd, out + P.encode(msg, seq))
 
     def handle(self, fr: P.Frame):
@@ -221,11 +259,12 @@ class FakeMCU(threading.Thread):
         except P.ProtocolError:
             return self.reply(P.Nak(fr.msg_type, P.NakReason.BAD_LENGTH), fr.seq)
         self.received.append((fr.seq, msg))
+        self.arrived.append(time.monotonic())
         if self.drop_next:
             self.drop_next -= 1
             return None
         if isinstance(msg, P.Ping):
-            return self.reply(P.Pong(msg.nonce, 1, 0x0100, 5, 400), fr.seq)
+            return self.reply(P.Pong(msg.nonce, self.version, 0x0200, 5, 400), fr.seq)
         if isinstance(msg, P.GetTelemetry):
             return self.reply(self.telemetry, fr.seq)
         if isinstance(msg, P.SetHeading) and abs(msg.azimuth_mrad) > P.AZIMUTH_LIMIT_MRAD:
@@ -250,11 +289,13 @@ def fake():
 
 
 FAST = SerialDriveConfig(reply_timeout=0.05, retries=3, keepalive=None, connect_timeout=1.0)
+# for tests that count resends or replies: the fake MCU is a Python thread, slow to answer on a loaded machine
+STEADY = SerialDriveConfig(reply_timeout=2.0, retries=0, keepalive=None, connect_timeout=3.0)
 
 
 def test_drive_commands_and_replies_over_pty(fake):
     with SerialDrive(fake.path, FAST) as drive:
-        assert drive.board is not None and drive.board.firmware_version == 0x0100
+        assert drive.board is not None and drive.board.firmware_version == 0x0200
         assert drive.ping() < 0.05
         drive.set_twist(0.2, -0.1, 0.5)
         drive.set_heading(math.radians(-4.0), 0.3)           # the paper's azimuth command
@@ -276,7 +317,8 @@ def test_drive_commands_and_replies_over_pty(fake):
 
 
 def test_missing_reply_is_resent_with_same_seq(fake):
-    with SerialDrive(fake.path, FAST) as drive:
+    cfg = SerialDriveConfig(reply_timeout=0.3, retries=3, keepalive=None, connect_timeout=1.0)
+    with SerialDrive(fake.path, cfg) as drive:
         n0 = len(fake.received)
         fake.drop_next = 2
         drive.set_twist(0.1, 0, 0)
@@ -290,7 +332,7 @@ def test_missing_reply_is_resent_with_same_seq(fake):
 
 
 def test_garbage_and_stale_replies_are_skipped(fake):
-    with SerialDrive(fake.path, FAST) as drive:
+    with SerialDrive(fake.path, STEADY) as drive:
         fake.garbage = bytes([0x00, P.SOF, 0x03, 0x81, P.SOF, 0xFF, 0x12, P.SOF])
         fake.stale_first = True
         for _ in range(5):
@@ -351,3 +393,65 @@ def test_loop_url_echo_is_not_a_reply():
         drive.set_twist(0.1, 0.0, 0.0)
     assert drive.stats.retries == 2
     drive._ser.close()
+
+
+def test_nak_for_another_message_with_the_same_seq_is_not_ours(fake):
+    """Issue 14: replies are matched on type and seq; a NAK naming another command is skipped."""
+    with SerialDrive(fake.path, STEADY) as drive:
+        fake.foreign_nak_first = True
+        for _ in range(5):
+            drive.set_twist(0.1, 0.0, 0.0)             # the NAK names SET_HEADING: not this command's reply
+            drive.ping()
+            drive.stop()
+        assert drive.stats.stale_replies == 15 and drive.stats.retries == 0
+        with pytest.raises(DriveCommandError, match="rejected SET_HEADING"):
+            drive.set_heading(0.0, 0.1)                # ... but it is the reply to a SET_HEADING
+        fake.foreign_nak_first = False
+
+
+def test_keepalive_stops_at_the_command_deadline(fake):
+    """Issue 14: the keepalive repeats a command only while the application refreshes it."""
+    cfg = SerialDriveConfig(reply_timeout=0.05, keepalive=0.05, command_deadline=0.3, connect_timeout=1.0)
+    with SerialDrive(fake.path, cfg) as drive:
+        for _ in range(8):                             # a live control loop: 0.4 s, longer than the deadline
+            drive.set_twist(0.1, 0.0, 0.0)
+            time.sleep(0.05)
+        t_last = time.monotonic()
+        drive.set_twist(0.2, 0.0, 0.0)
+        time.sleep(0.6)                                # ... then it hangs
+        msgs = [m for _, m in fake.received]
+        i_stop = next(i for i, m in enumerate(msgs) if isinstance(m, P.Stop))
+        assert isinstance(msgs[i_stop - 1], P.SetTwist) and msgs[i_stop - 1].vx_mm_s == 200
+        assert sum(isinstance(m, P.SetTwist) and m.vx_mm_s == 200 for m in msgs) >= 4    # kept alive meanwhile
+        assert 0.3 <= fake.arrived[i_stop] - t_last <= 0.3 + 0.25      # slack: thread wake-ups on a loaded host
+        assert not any(isinstance(m, P.SetTwist) for m in msgs[i_stop:])
+        assert drive.stats.deadline_stops == 1
+
+
+def test_second_serial_drive_on_a_port_is_refused(fake):
+    with SerialDrive(fake.path, FAST) as first:
+        with pytest.raises(DriveLinkError, match=f"'{fake.path}' is in use by another program"):
+            SerialDrive(fake.path, FAST)
+        first.ping()
+    SerialDrive(fake.path, FAST).close()               # free again once closed
+
+
+def test_firmware_of_another_protocol_version_is_refused(fake):
+    fake.version = P.PROTOCOL_VERSION - 1
+    with pytest.raises(DriveProtocolError, match=f"protocol version {P.PROTOCOL_VERSION - 1}.*flash"):
+        SerialDrive(fake.path, FAST)
+
+
+def test_status_reports_bumpers_and_yaw_rate(fake):
+    with SerialDrive(fake.path, FAST) as drive:
+        assert drive.status().yaw_rate is None                          # no gyro on this board
+        bias, rate = 40, 1000                                           # counts
+        fake.telemetry = P.Telemetry(gyro_z=bias, sensors=int(P.Sensor.GYRO_OK))
+        assert drive.status().yaw_rate == 0.0                           # standing still: that is the bias
+        fake.telemetry = P.Telemetry(duty=(100, 100, 100), gyro_z=bias + rate, sensors=int(P.Sensor.GYRO_OK))
+        assert drive.status().yaw_rate == pytest.approx(rate / P.GYRO_COUNTS_PER_RAD_S)
+        fake.telemetry = P.Telemetry(bumpers=0x20)                      # released now, pressed since the last read
+        drive.odometry()                                                # a read by odometry() ...
+        fake.telemetry = P.Telemetry()
+        assert drive.status().bumper                                    # ... does not lose it
+        assert not drive.status().bumper

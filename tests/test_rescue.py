@@ -326,6 +326,25 @@ def test_drive_is_stopped_on_any_exception():
     assert w2.drive.commands[-1].twist == (0.0, 0.0, 0.0)
 
 
+def test_error_event_says_whether_the_drive_stopped():
+    w = World([Source((0.0, 3.0, 0.1), 65.0)])
+    b = make(w)
+
+    def broken(*args):
+        raise RuntimeError("drive link lost")
+
+    w.drive.set_twist = broken
+    with pytest.raises(RuntimeError):
+        b.step()
+    assert b.events[-1].reason.endswith("; drive stopped") and b.events[-1].data["stopped"]
+    w.drive.stop = broken
+    with pytest.raises(RuntimeError):
+        b.step()
+    ev = b.events[-1]
+    assert ev.decision == "error" and not ev.data["stopped"]
+    assert "stopping the drive failed too (drive link lost)" in ev.reason and "drive stopped" not in ev.reason
+
+
 def test_listens_standing_still_with_fresh_audio():
     w = World([Source((0.0, 3.0, 0.1), 65.0)])
     audio = FakeAudio(w.clock)

@@ -108,3 +108,22 @@ def test_live_audio_path_with_a_fake_sounddevice(monkeypatch):
     heard = next(line for line in text.splitlines() if " heard " in line)
     assert float(heard.split("az ")[1].split(" deg")[0]) == pytest.approx(-150, abs=5)
     assert sd.opened == []  # streams closed at exit
+
+
+def test_a_failed_stop_is_reported_not_hidden(recording, monkeypatch, capsys):
+    """Issue 14: "(robot stopped)" only when the stop worked; otherwise say that it failed."""
+    from robot import cli
+    from robot.replay import DryRunDrive
+
+    class DeadDrive(DryRunDrive):
+        def set_twist(self, vx, vy, omega):
+            raise RuntimeError("drive link lost")
+
+        def stop(self):
+            raise RuntimeError("drive link lost")
+
+    monkeypatch.setattr(cli, "_open_drive", lambda args, clock: DeadDrive(clock))
+    code, text = run(["--dry-run", "--replay", str(recording), "--max-time", "8"])
+    err = capsys.readouterr().err
+    assert code == 1
+    assert "stopping the robot FAILED: RuntimeError: drive link lost" in err and "robot stopped" not in err

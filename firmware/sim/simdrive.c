@@ -16,12 +16,27 @@
  *    every call of that function prints "PROF <entry cycle> <cycles to its return>",
  *    interrupts taken meanwhile included.
  *  - "WDT <cycle> <WDTCSR>" whenever the watchdog control register changes.
- *  - Simulated time is throttled to never run ahead of wall-clock time (x --speed), so
- *    the firmware's 300 ms watchdog means 300 ms to the host; simavr otherwise runs the
- *    core as fast as it can (sleep periods advance in 16-cycle steps).
+ *  - Simulated time is throttled to never run ahead of wall-clock time (x --speed), and
+ *    never to catch up more than MAX_LAG_S of a lag (the harness descheduled on a loaded
+ *    host): simulated time between two moments never exceeds the wall time between them
+ *    by more than that, so a host that refreshes its commands every 100 ms of wall time
+ *    never looks silent for 200 ms to the firmware. Under load the board runs slower than
+ *    real time instead. (simavr alone runs the core as fast as it can; sleep periods
+ *    advance in 16-cycle steps.)
+ *  - A virtual MPU-6050 gyro (sim/gyro_part.h) answers on the TWI bus at 0x68 (not with
+ *    --no-gyro); bumper switches pull PC0..PC3 low when pressed.
+ *  - Test-harness commands on stdin, one per line (acknowledged on stdout with the cycle):
+ *        RX <hex bytes>       queue bytes on the line right after those already queued: they
+ *                             enter the UART back-to-back, one per character time of
+ *                             *simulated* time, whatever the host's scheduling; "RXDONE
+ *                             <cycle>" when the last has been received
+ *        BUMP <hex mask> [ms] press the switches in mask (bit i = PCi), all others released;
+ *                             with ms, release them after that much simulated time
+ *        GYRO <rad/s>         the gyro's true Z rate (the test adds any bias it wants)
+ *        GYRO unplug | plug   the chip stops answering / is plugged in again (powered up afresh)
  *
  * usage: simdrive [--stall WHEEL] [--speed X] [--duration S] [--cpr N] [--max-speed RADS]
- *                 [--pwm-top N] [--profile ADDR] firmware.elf
+ *                 [--pwm-top N] [--profile ADDR] [--no-gyro] firmware.elf
  */
 #define _GNU_SOURCE
 #include <errno.h>
@@ -38,10 +53,13 @@
 #include <unistd.h>
 
 #include "avr_ioport.h"
+#include "avr_twi.h"
 #include "avr_uart.h"
 #include "sim_avr.h"
 #include "sim_elf.h"
 #include "sim_irq.h"
+
+#include "gyro_part.h"
 
 DEFINE_FIFO(uint16_t, uart_fifo);                /* the header only declares the UART FIFO accessors */
 
@@ -53,6 +71,7 @@ DEFINE_FIFO(uint16_t, uart_fifo);                /* the header only declares the
 #define SETTLE_CYCLES 200
 #define SYNC_CYCLES 800          /* 50 us: pty pumping, throttling, motor model step */
 #define ENC_REPORT_CYCLES (F_SIM / 20)
+#define MAX_LAG_S 0.002          /* lag beyond this is given up, never caught up */
 
 static avr_t *avr;
 static avr_uart_t *uart0;
@@ -61,8 +80,11 @@ static volatile sig_atomic_t stop_flag;
 
 static uint8_t out_buf[4096];
 static size_t out_len;
-static uint8_t in_buf[4096];
+static uint8_t in_buf[1 << 16];                  /* the line: bytes from the pty and from RX commands */
 static size_t in_len, in_pos;
+static size_t rx_done_at;                        /* in_pos at which the last RX command is complete (0: none) */
+static char cmd_buf[1 << 17];                    /* stdin command line being assembled */
+static size_t cmd_len;
 
 static avr_cycle_count_t last_rx_cycle;
 
@@ -103,6 +125,17 @@ static void rxc_pending_hook(struct avr_irq_t *irq, uint32_t value, void *param)
         last_rx_cycle = avr->cycle;
 }
 
+static void compact_line(void)
+{
+    if (in_pos) {
+        memmove(in_buf, in_buf + in_pos, in_len - in_pos);
+        in_len -= in_pos;
+        if (rx_done_at)
+            rx_done_at -= in_pos;
+        in_pos = 0;
+    }
+}
+
 static void pump_pty(void)
 {
     if (out_len) {
@@ -112,12 +145,72 @@ static void pump_pty(void)
             out_len -= (size_t)n;
         }
     }
-    if (in_pos == in_len) {
-        in_pos = in_len = 0;
-        ssize_t n = read(pty_master, in_buf, sizeof in_buf);
+    compact_line();
+    if (in_len < sizeof in_buf) {
+        ssize_t n = read(pty_master, in_buf + in_len, sizeof in_buf - in_len);
         if (n > 0)
-            in_len = (size_t)n;
+            in_len += (size_t)n;
     }
+}
+
+/* --- bumpers: PC0..PC3 driven low while pressed (the firmware's pull-ups hold them high) --- */
+static avr_irq_t *bump_irq[4];
+static avr_cycle_count_t bump_release_at;
+
+static void set_bumpers(uint8_t pressed)
+{
+    for (int i = 0; i < 4; i++)
+        avr_raise_irq(bump_irq[i], (pressed >> i) & 1 ? 0 : 1);
+}
+
+static void run_command(char *line)
+{
+    char *arg = strchr(line, ' ');
+    if (arg)
+        *arg++ = 0;
+    if (!strcmp(line, "RX") && arg) {
+        compact_line();
+        for (char *h = arg; h[0] && h[1] && in_len < sizeof in_buf; h += 2) {
+            unsigned v;
+            if (sscanf(h, "%2x", &v) != 1)
+                break;
+            in_buf[in_len++] = (uint8_t)v;
+        }
+        rx_done_at = in_len;
+        printf("RXQUEUED %llu %zu\n", (unsigned long long)avr->cycle, in_len - in_pos);
+    } else if (!strcmp(line, "BUMP") && arg) {
+        unsigned mask = 0;
+        double ms = 0;
+        sscanf(arg, "%x %lf", &mask, &ms);
+        set_bumpers((uint8_t)mask);
+        bump_release_at = ms > 0 ? avr->cycle + (avr_cycle_count_t)(ms * 1e-3 * F_SIM) : 0;
+        printf("BUMP %llu %x\n", (unsigned long long)avr->cycle, mask);
+    } else if (!strcmp(line, "GYRO") && arg) {
+        if (!strcmp(arg, "unplug") || !strcmp(arg, "plug"))
+            gyro_part_unplug(!strcmp(arg, "unplug"));
+        else
+            gyro_part_set_rate(atof(arg));
+        printf("GYRO %llu %s\n", (unsigned long long)avr->cycle, arg);
+    } else {
+        fprintf(stderr, "simdrive: unknown command %s\n", line);
+    }
+}
+
+static void pump_commands(void)
+{
+    ssize_t n = read(STDIN_FILENO, cmd_buf + cmd_len, sizeof cmd_buf - 1 - cmd_len);
+    if (n <= 0)
+        return;
+    cmd_len += (size_t)n;
+    char *nl;
+    while ((nl = memchr(cmd_buf, '\n', cmd_len))) {
+        *nl = 0;
+        run_command(cmd_buf);
+        cmd_len -= (size_t)(nl + 1 - cmd_buf);
+        memmove(cmd_buf, nl + 1, cmd_len);
+    }
+    if (cmd_len == sizeof cmd_buf - 1)
+        cmd_len = 0;                             /* an over-long line: drop it */
 }
 
 /* The line: one byte enters the simulated UART per character time, and only into an empty
@@ -131,6 +224,10 @@ static void feed_line(void)
         && uart_fifo_isempty(&uart0->input)) {
         avr_raise_irq(uart0->io.irq + UART_IRQ_INPUT, in_buf[in_pos++]);
         next_rx_cycle = avr->cycle + (uart0->cycles_per_byte ? uart0->cycles_per_byte : 1);
+        if (rx_done_at && in_pos == rx_done_at) {
+            rx_done_at = 0;
+            printf("RXDONE %llu\n", (unsigned long long)avr->cycle);
+        }
     }
 }
 
@@ -185,13 +282,14 @@ static avr_cycle_count_t wake_tick(avr_t *a, avr_cycle_count_t when, void *param
 static void usage(void)
 {
     fprintf(stderr, "usage: simdrive [--stall WHEEL] [--speed X] [--duration S] [--cpr N] "
-                    "[--max-speed RADS] [--pwm-top N] [--profile ADDR] firmware.elf\n");
+                    "[--max-speed RADS] [--pwm-top N] [--profile ADDR] [--no-gyro] firmware.elf\n");
     exit(2);
 }
 
 int main(int argc, char **argv)
 {
     const char *elf = NULL;
+    int with_gyro = 1;
     for (int i = 1; i < argc; i++) {
         if (!strcmp(argv[i], "--stall") && i + 1 < argc) stall_wheel = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--speed") && i + 1 < argc) speed_factor = atof(argv[++i]);
@@ -200,6 +298,7 @@ int main(int argc, char **argv)
         else if (!strcmp(argv[i], "--max-speed") && i + 1 < argc) max_speed = atof(argv[++i]);
         else if (!strcmp(argv[i], "--pwm-top") && i + 1 < argc) pwm_top = atoi(argv[++i]);
         else if (!strcmp(argv[i], "--profile") && i + 1 < argc) profile_addr = strtol(argv[++i], NULL, 0);
+        else if (!strcmp(argv[i], "--no-gyro")) with_gyro = 0;
         else if (argv[i][0] == '-') usage();
         else elf = argv[i];
     }
@@ -253,6 +352,14 @@ int main(int argc, char **argv)
     avr_ioctl(avr, AVR_IOCTL_IOPORT_SET_EXTERNAL('B'), &ext);
     for (int i = 0; i < 3; i++)
         set_encoder_pins(i);
+    for (int p = 0; p < 4; p++)
+        bump_irq[p] = avr_io_getirq(avr, AVR_IOCTL_IOPORT_GETIRQ('C'), p);
+    avr_ioport_external_t ext_c = {.name = 'C', .mask = 0x0F, .value = 0x0F};   /* released: high */
+    avr_ioctl(avr, AVR_IOCTL_IOPORT_SET_EXTERNAL('C'), &ext_c);
+    set_bumpers(0);
+    if (with_gyro)
+        gyro_part_attach(avr, AVR_IOCTL_TWI_GETIRQ(0));
+    fcntl(STDIN_FILENO, F_SETFL, fcntl(STDIN_FILENO, F_GETFL) | O_NONBLOCK);
 
     int slave;
     char name[256];
@@ -318,8 +425,17 @@ int main(int argc, char **argv)
             next_sync += steps * SYNC_CYCLES;
             motor_step((double)(steps * SYNC_CYCLES) / F_SIM);
             pump_pty();
+            pump_commands();
+            if (bump_release_at && avr->cycle >= bump_release_at) {
+                bump_release_at = 0;
+                set_bumpers(0);
+                printf("BUMP %llu 0\n", (unsigned long long)avr->cycle);
+            }
             double sim_s = (double)avr->cycle / F_SIM;
-            double ahead = sim_s / speed_factor - wall_seconds(&t0);
+            static double given_up;                  /* wall seconds of lag not to catch up */
+            double ahead = sim_s / speed_factor - (wall_seconds(&t0) - given_up);
+            if (ahead < -MAX_LAG_S)
+                given_up += -ahead - MAX_LAG_S;
             if (ahead > 0.0005) {
                 struct timespec d = {0, (long)(ahead * 1e9)};
                 nanosleep(&d, NULL);

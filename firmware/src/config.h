@@ -10,7 +10,7 @@
 #define F_CPU 16000000UL
 #endif
 
-#define FW_VERSION          0x0100u   /* major << 8 | minor */
+#define FW_VERSION          0x0200u   /* major << 8 | minor */
 #define UART_BAUD           115200UL  /* 8N1, U2X: UBRR 16 -> 117647 Bd (+2.1 %, same as the Mega's USB bridge) */
 
 /* --- kinematics (robot.kinematics.OmniDriveParams) --- */
@@ -25,11 +25,25 @@
 #define PWM_TOP             400u      /* Timer4 phase-correct PWM, TOP = ICR4: 16 MHz / (2 * 400) = 20 kHz */
 
 /* --- safety --- */
-#define CMD_TIMEOUT_MS      300u      /* command watchdog: ramp down after more than this without a motion command */
-#define RAMP_STEP_PER_MS    4u        /* duty counts per ms while ramping down: 400 -> 0 in 100 ms */
+/* Command watchdog (issue 14: duties at zero within 300 ms of the last valid command, at any duty):
+ * the ramp starts after more than CMD_TIMEOUT_MS without a motion command (200..201 ms with the
+ * 1 ms tick) and brings every channel linearly to zero in RAMP_MS ticks, all in proportion (the
+ * direction of motion is kept): zero 290..291 ms after the command, whatever the duty. */
+#define CMD_TIMEOUT_MS      200u
+#define RAMP_MS             90u
+#define STOP_DEADLINE_MS    300u      /* documented bound: CMD_TIMEOUT_MS + 1 + RAMP_MS must not exceed it */
 #define INTERBYTE_TIMEOUT_MS 5u       /* abandon an incomplete frame after this long without a byte */
 #define STALL_TIMEOUT_MS    500u      /* no encoder edge for this long while driven ... */
 #define STALL_MIN_DUTY      (PWM_TOP / 4u) /* ... at >= 25 % duty -> STALL */
+
+/* --- sensors --- */
+#define TWI_HZ              400000UL  /* I2C clock (MPU-6050: fast mode, 400 kHz) */
+#define GYRO_FS_SEL         1u        /* +-500 deg/s: covers the 8 rad/s (458 deg/s) turn at the wheel-speed limit */
+#define GYRO_LSB_PER_DPS_X10 655u     /* 65.5 LSB per deg/s at FS_SEL 1 (MPU-6050 datasheet, table 6.1) */
+#define GYRO_PERIOD_MS      5u        /* 200 Hz sampling, averaged over the ENC_WINDOW_MS window */
+#define GYRO_BUS_TIMEOUT_MS 3u        /* a transaction takes ~0.15 ms at 400 kHz; longer = hung bus */
+#define GYRO_RETRY_MS       1000u     /* re-probe a missing or failed gyro this often */
+#define BUMPER_DEBOUNCE_MS  5u        /* a switch level must hold this long (contact bounce) */
 
 /* --- encoders --- */
 #define ENC_WINDOW_MS       50u       /* telemetry encoder_rate window */

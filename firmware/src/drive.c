@@ -15,12 +15,15 @@
  *          PORTB because simavr models pin-change interrupts only there on the 2560; the
  *          external INT0..5 pins would cost the I2C bus. */
 #define DIR_MASK 0x07u
+
+_Static_assert(CMD_TIMEOUT_MS + 1u + RAMP_MS <= STOP_DEADLINE_MS, "watchdog ramp must end by STOP_DEADLINE_MS");
 #define ENC_MASK 0x3Fu
 
 static float jac[3][3];                 /* wheel speed (rad/s) = jac . (vx, vy, omega) */
 static int16_t duty[3];                 /* applied signed duty */
 static uint8_t active;                  /* non-zero setpoint held: the command watchdog is armed */
-static uint8_t ramping;
+static uint8_t ramping;                 /* ticks into the watchdog ramp (0: not ramping) */
+static int16_t ramp_from[3];            /* duties when the ramp started */
 static uint8_t limited;
 static uint16_t cmd_ms;                 /* tick of the last motion command */
 static uint16_t faults;
@@ -164,31 +167,24 @@ void drive_stop(void)
 
 void drive_tick(uint16_t now_ms)
 {
-    /* command watchdog: ramp to zero, RAMP_STEP_PER_MS counts per tick */
-    /* '>' : cmd_ms is the tick the command arrived in, so this trips 300..301 ms after it */
-    if (active && !ramping && (uint16_t)(now_ms - cmd_ms) > CMD_TIMEOUT_MS) {
-        ramping = 1;
+    /* command watchdog: '>' because cmd_ms is the tick the command arrived in, so the ramp
+     * starts 200..201 ms after it; then a linear ramp of RAMP_MS ticks, every channel in
+     * proportion, so each reaches zero at the same tick whatever its duty */
+    if (active && (uint16_t)(now_ms - cmd_ms) > CMD_TIMEOUT_MS) {
         faults |= FAULT_CMD_TIMEOUT;
+        for (uint8_t i = 0; i < 3; i++)
+            ramp_from[i] = duty[i];
+        active = 0;
+        ramping = 1;
     }
     if (ramping) {
-        uint8_t left = 0;
-        for (uint8_t i = 0; i < 3; i++) {
-            int16_t d = duty[i];
-            if (d > (int16_t)RAMP_STEP_PER_MS)
-                d -= RAMP_STEP_PER_MS;
-            else if (d < -(int16_t)RAMP_STEP_PER_MS)
-                d += RAMP_STEP_PER_MS;
-            else
-                d = 0;
-            duty[i] = d;
-            left |= d != 0;
-        }
+        uint8_t left = (uint8_t)(RAMP_MS - ramping);
+        for (uint8_t i = 0; i < 3; i++)
+            duty[i] = (int16_t)((int32_t)ramp_from[i] * left / (int16_t)RAMP_MS);
         apply();
-        if (!left) {
-            ramping = 0;
-            active = 0;
+        ramping = left ? (uint8_t)(ramping + 1) : 0;
+        if (!left)
             limited = 0;
-        }
     }
 
     uint16_t edge[3];

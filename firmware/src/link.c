@@ -121,7 +121,7 @@ uint8_t link_rx_overflowed(void)
 /* The parse window always starts at rx_tail; bytes leave the ring only when a frame is
  * accepted or a start byte is rejected, so rejecting a candidate rescans the bytes after
  * its start byte (a real frame hidden behind garbage is found). */
-uint8_t link_poll(frame_t *out, uint16_t now_ms)
+uint8_t link_poll(frame_t *out)
 {
     for (;;) {
         uint8_t tail = rx_tail;
@@ -163,10 +163,16 @@ uint8_t link_poll(frame_t *out, uint16_t now_ms)
                 return 1;
             }
         }
-        /* incomplete candidate: abandon it only after the inter-byte timeout */
-        uint16_t last;
-        ATOMIC_BLOCK(ATOMIC_RESTORESTATE) { last = rx_last_ms; }
-        if ((uint16_t)(now_ms - last) >= INTERBYTE_TIMEOUT_MS) {
+        /* incomplete candidate: abandon it only after the inter-byte timeout. The clock is read
+         * together with the last byte's tick: a "now" taken before this call could be older than
+         * a byte received meanwhile (a tick and a byte during a long rescan), and the wrapped
+         * difference was a spurious timeout that dropped a valid frame's start byte. */
+        uint16_t last, now;
+        ATOMIC_BLOCK(ATOMIC_RESTORESTATE) {
+            last = rx_last_ms;
+            now = g_ms;
+        }
+        if ((uint16_t)(now - last) >= INTERBYTE_TIMEOUT_MS) {
             link_stats.timeouts++;
             rx_tail = (uint8_t)(tail + 1);
             continue;

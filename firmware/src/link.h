@@ -12,9 +12,9 @@ typedef struct {
 extern link_stats_t link_stats;
 
 void link_init(void);
-/* Extract the next CRC-valid frame from the receive ring into *out (1) or 0 when none is complete.
- * now_ms: the 1 kHz tick, for the inter-byte timeout. */
-uint8_t link_poll(frame_t *out, uint16_t now_ms);   /* now_ms must be current: compared with the ISR's last-byte tick */
+/* Extract the next CRC-valid frame from the receive ring into *out (1) or 0 when none is complete;
+ * an incomplete candidate is abandoned after INTERBYTE_TIMEOUT_MS without a byte. */
+uint8_t link_poll(frame_t *out);
 /* Remember the receive position; link_rx_new() then tells whether bytes arrived since
  * (the main loop sleeps only if none did). */
 void link_rx_mark_seen(void);

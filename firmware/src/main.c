@@ -2,9 +2,13 @@
  * from the host over UART0 (docs/protocol.md), drives three omni wheels through
  * H-bridges (PWM + direction) and reports wheel encoders and faults.
  *
+ * Also reads an MPU-6050-class I2C gyro (yaw rate) and up to four bumper switches.
+ *
  * Timers: T0 1 kHz tick, T1 free-running cycle counter (profiling), T4 motor PWM. */
+#include "bumpers.h"
 #include "config.h"
 #include "drive.h"
+#include "gyro.h"
 #include "link.h"
 #include "protocol.h"
 
@@ -97,6 +101,9 @@ static void send_telemetry(uint8_t seq)
                                    max_parse_cycles, max_cmd_cycles};
     for (uint8_t i = 0; i < 10; i++)
         put_u16(p + 30 + 2 * i, counters[i]);
+    put_u16(p + 50, (uint16_t)gyro_rate());
+    p[52] = gyro_ok() ? SENSOR_GYRO_OK : 0;
+    p[53] = (uint8_t)(bumpers_now() | (uint8_t)(bumpers_take_pressed() << 4));
     link_send(MSG_TELEMETRY, seq, p, TELEMETRY_LEN);
 }
 
@@ -172,6 +179,8 @@ int main(void)
 
     drive_init();                                   /* outputs at zero duty first */
     link_init();
+    bumpers_init();
+    gyro_init();
     /* T0: CTC, /64, OCR0A 249 -> 1 kHz */
     TCCR0A = _BV(WGM01);
     TCCR0B = _BV(CS01) | _BV(CS00);
@@ -190,8 +199,11 @@ int main(void)
     for (;;) {
         wdt_reset();
         uint16_t now = ms_now();
-        while (done_ms != now)
+        while (done_ms != now) {
             drive_tick(++done_ms);
+            bumpers_tick();
+            gyro_tick(done_ms);
+        }
         if (link_rx_overflowed())
             latched_faults |= FAULT_RX_OVERFLOW;
 
@@ -200,7 +212,7 @@ int main(void)
         link_rx_mark_seen();              /* bytes arriving from here on keep us awake */
         for (;;) {
             uint16_t t0 = cycles_now();
-            uint8_t got = link_poll(&f, ms_now());   /* fresh: a dispatch may have waited */
+            uint8_t got = link_poll(&f);
             uint16_t dt = (uint16_t)(cycles_now() - t0);
             if (dt > max_parse_cycles)
                 max_parse_cycles = dt;

@@ -5,7 +5,7 @@
 #include <stdint.h>
 
 #define PROTO_SOF            0xA5u
-#define PROTO_VERSION        1u
+#define PROTO_VERSION        2u
 #define PROTO_HEADER_LEN     4u      /* SOF LEN TYPE SEQ */
 #define PROTO_CRC_LEN        2u
 #define PROTO_MCU_MAX_PAYLOAD 16u    /* commands are short; larger LEN is a length error */
@@ -27,7 +27,9 @@ enum fault_bits {
 #define ACK_SPEED_LIMITED    0x01u
 #define AZIMUTH_LIMIT_MRAD   3142
 
-#define TELEMETRY_LEN        50u
+#define TELEMETRY_LEN        54u
+
+#define SENSOR_GYRO_OK       0x01u   /* TELEMETRY sensors: the gyro answers and its rate is valid */
 #define PONG_LEN             13u
 
 typedef struct {

@@ -155,6 +155,15 @@ class _MissionClock(WallClock):
         return super().now() - self._t0
 
 
+def _stop(drive) -> str:
+    """Stop the drive and say what happened (the behaviour tried already; this reports the truth)."""
+    try:
+        drive.stop()
+    except Exception as exc:
+        return f"stopping the robot FAILED: {type(exc).__name__}: {exc}; switch the motors off"
+    return "robot stopped"
+
+
 def _print_event(e: RescueEvent, as_json: bool, out) -> None:
     if as_json:
         data = {k: v for k, v in e.data.items() if k != "candidates"}
@@ -234,10 +243,10 @@ def main(argv: list[str] | None = None, out=None) -> int:
         if not behaviour.done:
             print(f"{PROG}: mission time of {args.max_time:g} s used up", file=out)
     except KeyboardInterrupt:
-        print(f"{PROG}: interrupted, robot stopped", file=out)
+        print(f"{PROG}: interrupted, {_stop(drive)}", file=out)
         code = 130
-    except Exception as exc:  # the behaviour has stopped the drive already
-        print(f"{PROG}: error: {type(exc).__name__}: {exc} (robot stopped)", file=sys.stderr)
+    except Exception as exc:
+        print(f"{PROG}: error: {type(exc).__name__}: {exc} ({_stop(drive)})", file=sys.stderr)
         code = 1
     finally:
         for dev in (drive, audio):

@@ -80,7 +80,7 @@ class DriveStatus:
     bumper: bool = False          # a collision/contact is sensed now
     stalled: bool = False         # wheels commanded but not turning
     faults: tuple[str, ...] = field(default_factory=tuple)  # e.g. ("watchdog", "overcurrent")
-    yaw_rate: float | None = None  # gyro rate about the robot's +z (rad/s, CCW), None if unavailable
+    yaw_rate: float | None = None  # rad/s about the robot's +z (CCW positive) from a gyro; None: no gyro
 
     @property
     def ok(self) -> bool:
@@ -92,7 +92,10 @@ class DriveBase(ABC):
 
     @abstractmethod
     def set_twist(self, vx: float, vy: float, omega: float) -> None:
-        """Command a body twist (m/s, m/s, rad/s, robot frame); held until changed or stopped."""
+        """Command a body twist (m/s, m/s, rad/s, robot frame); held until changed or stopped.
+
+        Hardware backends hold it only while the caller refreshes it (``SerialDrive``: within 0.5 s), so a
+        hung control loop stops the robot: call it every control period while moving."""
 
     @abstractmethod
     def stop(self) -> None:

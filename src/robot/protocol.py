@@ -17,6 +17,7 @@ start byte and rescans the bytes it already holds, so a valid frame that follows
 """
 from __future__ import annotations
 
+import math
 import struct
 from dataclasses import dataclass, field, fields
 from enum import IntEnum, IntFlag
@@ -27,10 +28,13 @@ HEADER_LEN = 4             # SOF, LEN, TYPE, SEQ
 CRC_LEN = 2
 MAX_PAYLOAD = 64           # largest LEN any receiver accepts (the MCU accepts at most MCU_MAX_PAYLOAD)
 MCU_MAX_PAYLOAD = 16       # the MCU's commands are short: it rejects larger LEN at once (limits resync stalls)
-PROTOCOL_VERSION = 1
+PROTOCOL_VERSION = 2       # 2: TELEMETRY carries gyro_z, sensors, bumpers; watchdog ramp ends by 300 ms
 PWM_TOP = 400              # firmware duty counts for 100 % (reported in PONG too)
 ENCODER_WINDOW_S = 0.050   # telemetry ``encoder_rate`` = counts in the last 50 ms window
-COMMAND_TIMEOUT_S = 0.300  # the MCU ramps the motors to zero this long after the last motion command
+COMMAND_TIMEOUT_S = 0.200  # the MCU starts ramping the motors down this long after the last motion command ...
+STOP_DEADLINE_S = 0.300    # ... and every duty is zero by this long after it (firmware: 290-291 ms), at any duty
+# TELEMETRY gyro_z scale: MPU-6050 at FS_SEL 1 (+-500 deg/s), 65.5 LSB per deg/s (datasheet, table 6.1)
+GYRO_COUNTS_PER_RAD_S = 65.5 * 180.0 / math.pi
 
 
 class ProtocolError(ValueError):
@@ -81,6 +85,17 @@ class Fault(IntFlag):
     RX_OVERFLOW = 1 << 4      # latched: the receive ring buffer overflowed
     STALL = 1 << 5            # a wheel driven at >= 25 % duty shows no encoder edge for 500 ms
     ENCODER_ERROR = 1 << 6    # latched: impossible quadrature transition (missed edge)
+
+
+class Sensor(IntFlag):
+    """TELEMETRY ``sensors`` bits."""
+
+    NONE = 0
+    GYRO_OK = 1 << 0          # a gyro answered WHO_AM_I and ``gyro_z`` is valid
+
+
+BUMPERS_LIVE = 0x0F           # TELEMETRY ``bumpers``: bits 0-3 pressed now (debounced), PC0..PC3
+BUMPERS_PRESSED_SHIFT = 4     # bits 4-7: pressed at any time since the previous TELEMETRY
 
 
 FAULT_NAMES: dict[Fault, str] = {
@@ -228,7 +243,7 @@ class Telemetry(Message):
     ``ENCODER_WINDOW_S``, ``duty`` applied signed duty in counts of ``PWM_TOP``; counters wrap at 2**16."""
 
     TYPE: ClassVar[MsgType] = MsgType.TELEMETRY
-    FORMAT: ClassVar[str] = "<I" + "iii" + "hhh" + "hhh" + "H" + "H" * 10
+    FORMAT: ClassVar[str] = "<I" + "iii" + "hhh" + "hhh" + "H" + "H" * 10 + "hBB"
     ARITY: ClassVar[dict[str, int]] = {"encoder_counts": 3, "encoder_rate": 3, "duty": 3}
     uptime_ms: int = 0
     encoder_counts: tuple[int, int, int] = (0, 0, 0)
@@ -245,10 +260,22 @@ class Telemetry(Message):
     tx_dropped: int = 0         # replies dropped because the transmit ring was full (request flood)
     max_parse_cycles: int = 0   # worst CPU cycles of one parser call (<= 1 frame, rescans and ISRs incl.)
     max_cmd_cycles: int = 0     # worst CPU cycles to execute one command (IK, PWM update, reply)
+    gyro_z: int = 0             # mean gyro Z rate over the last 50 ms, counts (GYRO_COUNTS_PER_RAD_S), bias included
+    sensors: int = 0            # Sensor bits
+    bumpers: int = 0            # bits 0-3 pressed now, bits 4-7 pressed since the previous TELEMETRY
 
     @property
     def fault_flags(self) -> Fault:
         return Fault(self.faults & sum(FAULT_NAMES))
+
+    @property
+    def gyro_ok(self) -> bool:
+        return bool(self.sensors & Sensor.GYRO_OK)
+
+    @property
+    def bumpers_pressed(self) -> int:
+        """Bit mask of the switches pressed now or at any time since the previous TELEMETRY."""
+        return (self.bumpers | self.bumpers >> BUMPERS_PRESSED_SHIFT) & BUMPERS_LIVE
 
 
 MESSAGES: dict[int, type[Message]] = {

@@ -102,7 +102,8 @@ class RescueConfig:
     settle_s: float = 0.3                  # wait after stopping before listening (s): motor noise, sway
     min_power: float = 0.0                 # ignore detections with a lower normalised SRP power
     voice_threshold: float = 0.1           # VAD speech-frame fraction of a beam counted as voice (robot.listening;
-    #                                        0.2 separates dry 1 s chunks, reverberant beams 2-4 m away have fewer)
+    #                                        robot.vad.CHUNK_SPEECH_FRACTION = 0.2 separates dry 1 s chunks;
+    #                                        reverberant beams of callers 2-4 m away have fewer)
     require_voice: bool = False            # approach only sources classified victim (not unclassified ones)
     # geometry (shared with the sound map: one source of truth for the array height)
     array_height_m: float = 0.30           # array centre above the floor
@@ -247,9 +248,10 @@ class RescueBehaviour:
         except EOFError as exc:
             self._finish(Decision.AUDIO_ENDED, f"audio source exhausted ({exc})")
         except BaseException as exc:
-            self._safe_stop()
-            self._emit(Decision.ERROR, f"{type(exc).__name__}: {exc}; drive stopped",
-                       {"exception": type(exc).__name__})
+            failed = self._safe_stop()
+            outcome = "drive stopped" if failed is None else f"stopping the drive failed too ({failed})"
+            self._emit(Decision.ERROR, f"{type(exc).__name__}: {exc}; {outcome}",
+                       {"exception": type(exc).__name__, "stopped": failed is None})
             raise
         finally:
             self._safe_stop()
@@ -618,11 +620,14 @@ class RescueBehaviour:
         self.state = RescueState.DONE
         self._emit(decision, reason, {"victims": [v.position for v in self.victims]})
 
-    def _safe_stop(self) -> None:
+    def _safe_stop(self) -> Exception | None:
+        """Stop the drive; the exception if that failed (logged, never raised)."""
         try:
             self.drive.stop()
         except Exception as exc:  # never mask the original error; the backend's own failsafe must act
             log.error("drive.stop() failed: %s", exc)
+            return exc
+        return None
 
     def _emit(self, decision: Decision, reason: str, data: dict[str, Any] | None = None) -> RescueEvent:
         ev = RescueEvent(self.clock.now(), self.state, Decision(decision), reason, dict(data or {}))

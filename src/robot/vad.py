@@ -2,13 +2,21 @@
 
 Chosen by measurement on ``data/sounds`` (``benchmarks/bench_voice.py``, README "Telling a victim
 from a machine") over WebRTC's VAD and the old hand-made ``robot.voice.voice_likeness`` score.
-The model file ``models/silero_vad_16k_op15.onnx`` is copied unchanged from the ``silero-vad``
-6.2.3 wheel (MIT, ``models/silero_vad.LICENSE``; sha256 7ed98ddb...c49): that package itself
-requires torch, which the Raspberry Pi does not need for an ONNX model.
+The model file ``models/silero_vad_op18_ifless.onnx`` is copied unchanged from the ``silero-vad``
+6.2.3 wheel (MIT, ``models/silero_vad.LICENSE``; sha256 7671cd04...bd28): that package itself
+requires torch, which the Raspberry Pi does not need for an ONNX model. It is the wheel's dual-rate
+export without ``If`` nodes: at 16 kHz its probabilities equal those of the 16 kHz-only export
+(``silero_vad_16k_op15.onnx``, used before) within 5e-7, and it also runs at 8 kHz.
+
+Cost (one core, onnxruntime 1.32, x86-64, process time per second of audio, one 32 ms frame per call;
+benchmarks/bench_voice.py): 16 kHz 3.5 ms for one stream, 8.8 ms for four batched; 8 kHz 2.8 and 5.8 ms
+(the 16 kHz-only export 4.3 / 9.9). A call costs ~60 us plus ~55 us (16 kHz) or ~30 us (8 kHz) per
+stream. On the data set's dev and test parts the 8 kHz model calls the same 1 s chunks speech as the
+16 kHz one (speech 100 %, every non-speech category 0 %; tests/test_voice.py checks the test part).
 
 Streaming and batched: every stream (one beam per tracked source) keeps its own LSTM state and
 its leftover samples; all streams with a whole frame pending go through the network in ONE call
-(batch = streams): four streams cost about twice one, not four times (benchmarks/bench_voice.py).
+(batch = streams).
 """
 from __future__ import annotations
 
@@ -19,11 +27,15 @@ from pathlib import Path
 import numpy as np
 from scipy import signal
 
-MODEL_PATH = Path(__file__).resolve().parent / "models" / "silero_vad_16k_op15.onnx"
-SAMPLE_RATE = 16000  # Hz; the 16 kHz-only export: the dual-rate model at 8 kHz measured no cheaper
-FRAME = 512          # samples (32 ms) per model call and stream
-_CONTEXT = 64        # samples of the previous frame the model sees in front of each frame
+MODEL_PATH = Path(__file__).resolve().parent / "models" / "silero_vad_op18_ifless.onnx"
+SAMPLE_RATE = 16000  # Hz, the default rate (the data set's); 8000 is the other one the model knows
+FRAME = 512          # samples (32 ms) per model call and stream at 16 kHz
+# per rate: samples per frame (32 ms) and samples of the previous frame the model sees in front of it
+_FRAMING = {16000: (FRAME, 64), 8000: (256, 32)}
 SPEECH_THRESHOLD = 0.5  # frame probability counted as speech (Silero's own default)
+# A 1 s chunk is speech when >= 20 % of its frames are: on the data/sounds dev part every value tried
+# from 0.05 to 0.3 separated speech from non-speech perfectly; 0.2 lies inside that range.
+CHUNK_SPEECH_FRACTION = 0.2
 
 
 @dataclass
@@ -40,54 +52,74 @@ class SileroVad:
     """Silero VAD on 16 kHz mono streams. One frame = 32 ms; ``process`` returns the speech
     probability (0..1) of each whole frame completed by the new samples."""
 
-    frame_s = FRAME / SAMPLE_RATE
+    frame_s = FRAME / SAMPLE_RATE  # 32 ms at either rate
 
-    def __init__(self, threads: int = 1, model_path: Path | str = MODEL_PATH) -> None:
+    def __init__(self, threads: int = 1, model_path: Path | str = MODEL_PATH, sample_rate: int = SAMPLE_RATE) -> None:
         import onnxruntime as ort  # robot's dependency; imported here so ssl_core users never pay for it
 
         if threads < 1:
             raise ValueError(f"threads: expected >= 1, got {threads}")
+        if sample_rate not in _FRAMING:
+            raise ValueError(f"sample_rate: expected one of {sorted(_FRAMING)} Hz, got {sample_rate}")
         opts = ort.SessionOptions()
         opts.intra_op_num_threads = threads  # its matrices are tiny: more threads cost CPU, gain nothing
         opts.inter_op_num_threads = 1
+        opts.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
+        # (no / basic / all graph optimisations, memory pattern on or off, thread spinning on or off:
+        # the same cost within 3 %; 2 intra-op threads double it: benchmarks/bench_voice.py)
         opts.log_severity_level = 3
         self._session = ort.InferenceSession(str(model_path), opts, providers=["CPUExecutionProvider"])
-        self._sr = np.array(SAMPLE_RATE, dtype=np.int64)
+        self.sample_rate = sample_rate
+        self.frame, self._context = _FRAMING[sample_rate]
+        self._sr = np.array(sample_rate, dtype=np.int64)
 
     def new_stream(self) -> VadStream:
-        return VadStream(np.zeros((2, 1, 128), np.float32), np.zeros(_CONTEXT, np.float32), np.zeros(0, np.float32))
+        return VadStream(np.zeros((2, 1, 128), np.float32), np.zeros(self._context, np.float32),
+                         np.zeros(0, np.float32))
 
     def process(self, streams: list[VadStream], audio: list[np.ndarray]) -> list[np.ndarray]:
-        """Feed each stream its new samples (float, full scale 1, 16 kHz); returns per stream the
+        """Feed each stream its new samples (float, full scale 1, at ``sample_rate``); returns per stream the
         probabilities of the frames completed now (possibly none)."""
         if len(streams) != len(audio):
             raise ValueError(f"audio: expected one array per stream ({len(streams)}), got {len(audio)}")
         for s, x in zip(streams, audio):
             x = np.asarray(x, np.float32).ravel()
-            s.pending = np.concatenate([s.pending, x])
-        counts = [len(s.pending) // FRAME for s in streams]
-        out: list[list[float]] = [[] for _ in streams]
-        for k in range(max(counts, default=0)):
-            idx = [i for i, c in enumerate(counts) if c > k]
-            frames = np.stack([streams[i].pending[k * FRAME:(k + 1) * FRAME] for i in idx])
-            inp = np.concatenate([np.stack([streams[i].context for i in idx]), frames], axis=1)
-            state = np.concatenate([streams[i].state for i in idx], axis=1)
-            prob, state = self._session.run(None, {"input": inp, "state": state, "sr": self._sr})
-            for j, i in enumerate(idx):
-                streams[i].state = state[:, j:j + 1].copy()
-                streams[i].context = inp[j, -_CONTEXT:].copy()
-                out[i].append(float(prob[j, 0]))
-        for s, c, o in zip(streams, counts, out):
-            s.pending = s.pending[c * FRAME:]
+            s.pending = np.concatenate([s.pending, x]) if len(s.pending) else x
+        frame, ctx = self.frame, self._context
+        counts = [len(s.pending) // frame for s in streams]
+        n = max(counts, default=0)
+        probs = np.zeros((len(streams), n), np.float32)
+        # Model inputs of every frame at once, (frames, streams, context + frame): each frame preceded by
+        # the last samples of the one before. A stream with fewer frames is padded; its padded frames'
+        # outputs and states are discarded.
+        if n:
+            pending = np.zeros((len(streams), n * frame), np.float32)
+            for i, (s, c) in enumerate(zip(streams, counts)):
+                pending[i, :c * frame] = s.pending[:c * frame]
+            frames = pending.reshape(len(streams), n, frame)
+            contexts = np.concatenate([np.stack([s.context for s in streams])[:, None], frames[:, :-1, -ctx:]], axis=1)
+            inputs = np.ascontiguousarray(np.concatenate([contexts, frames], axis=2).transpose(1, 0, 2))
+            state = np.concatenate([s.state for s in streams], axis=1)
+            for k in range(n):
+                prob, new_state = self._session.run(None, {"input": inputs[k], "state": state, "sr": self._sr})
+                probs[:, k] = prob[:, 0]
+                for i, s in enumerate(streams):
+                    if counts[i] == k + 1:   # this stream's last whole frame: keep its state and context
+                        s.state, s.context = new_state[:, i:i + 1].copy(), inputs[k, i, -ctx:].copy()
+                state = new_state
+        out = []
+        for i, (s, c) in enumerate(zip(streams, counts)):
+            s.pending = s.pending[c * frame:]
             s.n_frames += c
-        return [np.asarray(o) for o in out]
+            out.append(probs[i, :c].astype(float))
+        return out
 
     def probabilities(self, x: np.ndarray, fs: int = SAMPLE_RATE) -> np.ndarray:
         """Speech probability per 32 ms frame of one whole mono float signal at ``fs`` Hz (resampled to
-        16 kHz if needed; fresh state)."""
-        if fs != SAMPLE_RATE:
-            g = math.gcd(int(fs), SAMPLE_RATE)
-            x = signal.resample_poly(np.asarray(x, float), SAMPLE_RATE // g, int(fs) // g)
+        ``sample_rate`` if needed; fresh state)."""
+        if fs != self.sample_rate:
+            g = math.gcd(int(fs), self.sample_rate)
+            x = signal.resample_poly(np.asarray(x, float), self.sample_rate // g, int(fs) // g)
         return self.process([self.new_stream()], [x])[0]
 
 

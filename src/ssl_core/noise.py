@@ -11,8 +11,6 @@ gaps within a second or two, steady noise does not.
 """
 from __future__ import annotations
 
-from collections import deque
-
 import numpy as np
 
 
@@ -24,13 +22,27 @@ class NoiseFloor:
             raise ValueError(f"noise floor memory must be >= 1 chunk, got {memory_chunks}")
         # bias: the minimum of ~10 chunk means of a steady noise sits ~1/1.5 below its mean
         self.over_subtraction = over_subtraction * bias
-        self._minima: deque[np.ndarray] = deque(maxlen=memory_chunks)
+        self._memory = memory_chunks
+        self._means: np.ndarray | None = None   # ring buffer (memory_chunks, bins) of chunk means
+        self._count = 0                         # chunks seen
 
     def reset(self) -> None:
-        self._minima.clear()
+        self._means, self._count = None, 0
 
     def weights(self, power: np.ndarray) -> np.ndarray:
         """Weights in [0, 1] for one chunk of band power ``(frames, bins)``; updates the floor first."""
-        self._minima.append(power.mean(axis=0))
-        floor = np.min(self._minima, axis=0)
+        return self.gains(power, self.update(power))
+
+    def update(self, power: np.ndarray) -> np.ndarray:
+        """Take one chunk of band power ``(frames, bins)`` into the floor; returns the floor ``(bins,)``."""
+        mean = power.mean(axis=0)
+        if self._means is None or self._means.shape[1:] != mean.shape:
+            self._means, self._count = np.empty((self._memory, *mean.shape), mean.dtype), 0
+        self._means[self._count % self._memory] = mean
+        self._count += 1
+        return self._means[: min(self._count, self._memory)].min(axis=0)
+
+    def gains(self, power: np.ndarray, floor: np.ndarray) -> np.ndarray:
+        """``w = clip(1 - g N / P, 0, 1)`` for band power ``power`` and a floor broadcasting against it
+        (several floors' chunks at once: ``(k, frames, bins)`` with ``(k, 1, bins)``)."""
         return np.clip(1.0 - self.over_subtraction * floor / np.maximum(power, np.finfo(power.dtype).tiny), 0.0, 1.0)

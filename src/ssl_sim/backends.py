@@ -32,6 +32,7 @@ import numpy as np
 
 from robot.hal import AudioBlock, AudioSource
 from ssl_sim.acoustics import AcousticConfig, AcousticSimulator, SoundSource
+from ssl_sim.acoustics.ego_noise import EgoNoise, EgoNoiseConfig
 from ssl_sim.physics import SimClock, SimDriveBase, SimRobot
 from ssl_sim.world import World
 
@@ -46,10 +47,13 @@ class SimAudioSource(AudioSource):
     counts as standing still (rendered at the block's mean pose).
     ``on_block``: optional callback ``(block, mic_positions_world)`` after every read
     (instrumentation: visualisation, timing); ``mic_positions_world`` is (n_chunks, n_mics, 3).
+    ``ego_noise``: the drive's motor/gear/roller noise (:mod:`ssl_sim.acoustics.ego_noise`), from the
+    wheel speeds at the chunk boundaries (linear in between); None: a silent drive.
     """
 
     def __init__(self, robot: SimRobot, acoustics: AcousticSimulator, chunk_s: float = 0.05,
-                 still_tolerance_m: float = 3e-3, on_block=None) -> None:
+                 still_tolerance_m: float = 3e-3, on_block=None,
+                 ego_noise: EgoNoiseConfig | None = EgoNoiseConfig()) -> None:
         if robot.world is not None and acoustics.world is not robot.world and acoustics.world != robot.world:
             raise ValueError("SimAudioSource: robot and acoustics must simulate the same World")
         if not chunk_s > 0:
@@ -59,6 +63,7 @@ class SimAudioSource(AudioSource):
         self.robot, self.acoustics = robot, acoustics
         self.chunk_s, self.still_tolerance_m = float(chunk_s), float(still_tolerance_m)
         self.on_block = on_block
+        self.ego_noise = EgoNoise(acoustics, ego_noise) if ego_noise is not None else None
         self._n_mics = robot.mic_positions().shape[0]
         self.blocks_read = 0
         self.moving_blocks = 0
@@ -87,23 +92,37 @@ class SimAudioSource(AudioSource):
         t_start = time.perf_counter()
         mics = [self.robot.mic_positions()]
         poses = [self.robot.array_pose()]
+        speeds = [self.robot.wheel_odometry().wheel_speeds]
+        motors = [self.robot.motor_positions()] if self.ego_noise is not None else []
         for a, b in zip(bounds[:-1], bounds[1:]):
             self._step_to((n0 + b) / fs)
             mics.append(self.robot.mic_positions())
             poses.append(self.robot.array_pose())
+            speeds.append(self.robot.wheel_odometry().wheel_speeds)
+            if self.ego_noise is not None:
+                motors.append(self.robot.motor_positions())
         self.last_array_poses = poses
         t_phys = time.perf_counter()
         self.timing["physics"] += t_phys - t_start
         traj = np.stack(mics)  # poses at the chunk boundaries (n_chunks + 1, n_mics, 3)
+        ego = None
+        if self.ego_noise is not None:
+            # Wheel speeds per sample (linear between chunk boundaries); motors and mics at the block's middle
+            # (they move together: only the reflections' geometry changes along the block).
+            w = np.stack([np.interp(np.arange(n), bounds, np.asarray(speeds)[:, i]) for i in range(3)])
+            ego = self.ego_noise.pressure(traj[len(traj) // 2], motors[len(traj) // 2], w, n0)
+            if not np.any(ego):
+                ego = None
         moved = float(np.max(np.linalg.norm(traj - traj[0], axis=-1)))
         if moved <= self.still_tolerance_m:
             used = traj.mean(axis=0, keepdims=True)
-            x = self.acoustics.listen(used[0], n / fs, n0 / fs)
+            x = self.acoustics.listen(used[0], n / fs, n0 / fs, extra_pressure=ego)
         else:
             self.moving_blocks += 1
             # Each chunk at the pose in its middle (mean of its end poses).
             used = 0.5 * (traj[:-1] + traj[1:])
-            x = np.concatenate([self.acoustics.listen(used[i], (b - a) / fs, (n0 + a) / fs)
+            x = np.concatenate([self.acoustics.listen(used[i], (b - a) / fs, (n0 + a) / fs,
+                                                      extra_pressure=None if ego is None else ego[:, a:b])
                                 for i, (a, b) in enumerate(zip(bounds[:-1], bounds[1:]))], axis=1)
         self.timing["acoustics"] += time.perf_counter() - t_phys
         self.blocks_read += 1
@@ -159,13 +178,15 @@ class SimHal:
 
 def make_sim_hal(world: World, sources: Sequence[SoundSource] | None = None,
                  acoustic_config: AcousticConfig | None = None, start: tuple[float, float, float] | None = None,
-                 robot: SimRobot | None = None, chunk_s: float = 0.05) -> SimHal:
+                 robot: SimRobot | None = None, chunk_s: float = 0.05,
+                 ego_noise: EgoNoiseConfig | None = EgoNoiseConfig()) -> SimHal:
     """Robot, acoustics and the three HAL backends for ``world``.
 
     ``sources``: sound sources (default: the world's victims with the config's default voices).
     ``start``: robot start pose (x, y, yaw) in the world (default ``world.robot_start``).
-    ``robot``: an existing SimRobot of the same world to reuse instead of building one."""
+    ``robot``: an existing SimRobot of the same world to reuse instead of building one.
+    ``ego_noise``: the drive's own noise while the wheels turn (None: silent drive)."""
     robot = robot if robot is not None else SimRobot(world, start=start)
     acoustics = AcousticSimulator(world, acoustic_config, sources=sources)
-    return SimHal(robot, acoustics, SimAudioSource(robot, acoustics, chunk_s=chunk_s), SimDriveBase(robot),
+    return SimHal(robot, acoustics, SimAudioSource(robot, acoustics, chunk_s=chunk_s, ego_noise=ego_noise), SimDriveBase(robot),
                   SimClock(robot))

@@ -1,6 +1,7 @@
 """``ssl-rescue``: run rescue scenarios headlessly, watch them in rerun, sweep them over seeds.
 
     ssl-rescue list
+    ssl-rescue record paper_lab --duration 10 --out rec.wav     # then: ssl-locate rec.wav
     ssl-rescue run paper_lab --seed 3 --rerun save:out/run.rrd --out out/run
     ssl-rescue run scenarios/light_rubble_three.toml --rerun spawn
     ssl-rescue sweep paper_lab light_rubble_three --seeds 0:20 --out out/sweep
@@ -56,6 +57,26 @@ def _sweep(args: argparse.Namespace) -> int:
     return 0
 
 
+def _record(args: argparse.Namespace) -> int:
+    from ssl_sim.record import parse_pose, record_scenario
+
+    pose = parse_pose(args.pose) if args.pose is not None else None
+    truth = record_scenario(load_scenario(args.scenario), args.out, seed=args.seed, duration_s=args.duration,
+                            pose=pose)
+    out = Path(args.out)
+    print(f"wrote {out} ({truth['n_channels']} channels, {truth['duration_s']:.2f} s at {truth['fs']} Hz, int16) "
+          f"and {out.with_suffix('.json')} (truth every {truth['frame_s']} s, array frame)")
+    for s in truth["sources"]:
+        print(f"  {s['name']:<16} {s['kind']:<10} azimuth {s['azimuth_deg'][0]:7.1f} deg  elevation "
+              f"{s['elevation_deg'][0]:6.1f} deg  {s['distance_m'][0]:5.2f} m  sounding {100 * s['sounding_fraction']:.0f} %")
+    rt = truth["rt60_s"]
+    k = rt["octave_hz"].index(1000.0)
+    print(f"room RT60 at 1 kHz: {rt['simulated'][k]:.2f} s simulated (the scene's materials alone: "
+          f"{rt['scene_materials'][k]:.2f} s)")
+    print(f"try: ssl-locate {out} --array cube8 --sources {max(1, len(truth['sources']))}")
+    return 0
+
+
 def _list(args: argparse.Namespace) -> int:
     for name in scenario_names():
         sc = load_scenario(name)
@@ -90,6 +111,15 @@ def build_parser() -> argparse.ArgumentParser:
     s.add_argument("--out", default="out/sweep", help="directory for runs.csv, scenarios.csv, victims.csv, summary.md")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=_sweep)
+
+    rec = sub.add_parser("record", help="record the 8-channel WAV at the microphones plus a truth JSON")
+    rec.add_argument("scenario", help="a shipped scenario or a .toml file")
+    rec.add_argument("--seed", type=int, default=None, help="run seed (default: the scenario's)")
+    rec.add_argument("--duration", type=float, default=10.0, help="seconds to record (default 10)")
+    rec.add_argument("--pose", default=None, metavar="X,Y,YAW",
+                     help="robot pose (world m, m, rad; default: the scenario's start)")
+    rec.add_argument("--out", required=True, help="WAV file to write; the truth goes to the same name with .json")
+    rec.set_defaults(func=_record)
 
     ls = sub.add_parser("list", help="list the shipped scenarios")
     ls.set_defaults(func=_list)

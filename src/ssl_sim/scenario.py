@@ -82,7 +82,7 @@ VICTIM_SOUND_KINDS = (*VICTIM_SOUNDS, "continuous", "file")
 INTERFERER_KINDS = ("pump", "generator", "talker", "file")
 #: AcousticConfig fields a scenario may set (seed and ambient come from the scenario itself).
 ACOUSTIC_FIELDS = ("ism_order", "ism_budget", "late_reverb", "rt60_s", "max_rir_s", "visibility_grid_m",
-                   "min_obstacle_extent_m", "rir_cache_size")
+                   "min_obstacle_extent_m", "rir_cache_size", "diffraction")
 
 
 class ScenarioError(ValueError):

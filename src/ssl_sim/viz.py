@@ -206,6 +206,7 @@ class RerunLogger(RunLogger):
             raise ViewerUnavailable(str(exc).strip().splitlines()[0]) from exc
         if recording_name:
             self.rec.send_recording_name(recording_name)
+        self.rec.send_blueprint(rescue_blueprint())
         self.srp_radius_m = float(srp_radius_m)
         self.trail_every = int(trail_every)
         self._n_robot = 0
@@ -387,6 +388,28 @@ class RerunLogger(RunLogger):
         if problems:
             log.warning("rerun viewer did not take the end of the recording (%s); its view is incomplete",
                         "; ".join(problems))
+
+def rescue_blueprint():
+    """The viewer layout of a rescue recording: the 3D world and robot (left, large), the SRP map seen
+    from the array with detections and truth (top right), the plots (middle right) and the behaviour log
+    (bottom right), on the ``sim_time`` timeline."""
+    import rerun.blueprint as rrb
+
+    return rrb.Blueprint(
+        rrb.Horizontal(
+            rrb.Spatial3DView(origin="world", name="World and robot"),
+            rrb.Vertical(
+                rrb.Spatial3DView(origin="world/robot/array", contents=["$origin/**", "- $origin/cube"],
+                                  name="SRP map (array frame)"),
+                rrb.TimeSeriesView(origin="plots", name="Plots"),
+                rrb.TextLogView(origin="log", name="Behaviour log"),
+                row_shares=[3, 2, 2],
+            ),
+            column_shares=[3, 2],
+        ),
+        rrb.TimePanel(timeline="sim_time"),
+        collapse_panels=False,
+    )
 
 
 def make_logger(target: str | None, recording_name: str | None = None, fallback_save: str | Path | None = None,

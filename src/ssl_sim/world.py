@@ -68,17 +68,25 @@ class Box:
 
 @dataclass(frozen=True)
 class Room:
-    """A shoebox enclosure ``[0, Lx] x [0, Ly] x [0, Lz]`` (m) with surface materials."""
+    """A shoebox enclosure ``[0, Lx] x [0, Ly] x [0, Lz]`` (m) with surface materials.
+
+    ``wall_open_fraction``: share of the wall area that is open (doorways, broken windows, holes):
+    acoustically fully absorbing, spread evenly over the walls (the walls' absorption becomes
+    ``f + (1 - f) alpha``); the robot still cannot leave through them."""
 
     size: tuple[float, float, float] = (6.0, 5.0, 3.0)
     wall_material: str = "brickwork"
     floor_material: str = "concrete_floor"
     ceiling_material: str = "plasterboard"
+    wall_open_fraction: float = 0.0
 
     def __post_init__(self) -> None:
         object.__setattr__(self, "size", _vec("room.size", self.size, 3))
         if min(self.size) <= 0:
             raise ValueError(f"room.size: all extents must be > 0 m, got {self.size}")
+        f = self.wall_open_fraction
+        if isinstance(f, bool) or not isinstance(f, (int, float)) or not 0.0 <= f <= 0.9:
+            raise ValueError(f"room.wall_open_fraction: expected a fraction in [0, 0.9], got {f!r}")
 
     def contains(self, points, margin: float = 0.0) -> np.ndarray:
         p = np.asarray(points, float)

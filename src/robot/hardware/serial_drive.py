@@ -8,13 +8,27 @@ then a :class:`DriveLinkError` naming the port is raised. Garbage on the line is
 skipped by the resynchronising :class:`robot.protocol.FrameParser`.
 
 The firmware ramps the motors to zero when no motion command arrives for
-``COMMAND_TIMEOUT_S`` (300 ms). ``set_twist`` promises a twist "held until changed or
-stopped", so a background keepalive resends the current non-zero command every
-``keepalive`` seconds; if the host process dies the firmware stops the robot.
+``COMMAND_TIMEOUT_S`` (200 ms; all duties are zero by ``STOP_DEADLINE_S``, 300 ms). A
+background keepalive resends the current non-zero command every ``keepalive`` seconds,
+but only while the application itself refreshed it within ``command_deadline`` (a
+control loop that calls ``set_twist`` every few tens of ms): a control loop that hangs
+or dies stops the robot (the keepalive sends STOP at the deadline; if the whole host
+hangs, the firmware's watchdog stops it). The port is opened exclusively (POSIX
+``flock``), so a second program cannot fight over the motors.
+
+Replies are matched on type *and* sequence number: an ACK/NAK must name the command's
+type, so a late reply to another command that reused the sequence number is skipped.
+
+``status`` reports the bumper switches (pressed now or since the last status) and the
+gyro's yaw rate in rad/s with its zero-rate bias removed; the bias is learned from the
+TELEMETRY read while the robot stands still (all duties zero, no encoder counts).
 """
 from __future__ import annotations
 
+import errno
+import logging
 import math
+import os
 import threading
 import time
 from dataclasses import dataclass, field
@@ -34,11 +48,17 @@ except ImportError:      # pragma: no cover - non-POSIX host
 
 _LINK_ERRORS = (serial.SerialException, OSError, _TermiosError)
 
+log = logging.getLogger(__name__)
+
 COUNTS_PER_REV = 1200   # x4 quadrature counts per wheel revolution (e.g. 300-line encoder at the wheel)
 
 
 class DriveLinkError(RuntimeError):
     """The serial link to the drive MCU is missing, vanished, or the MCU stopped answering."""
+
+
+class DriveProtocolError(DriveLinkError):
+    """The MCU answers, but speaks another protocol version (flash the firmware of this checkout)."""
 
 
 class DriveCommandError(DriveLinkError):
@@ -58,6 +78,9 @@ class SerialDriveConfig:
     retries: int = 3                    # resends (same seq) after the first attempt
     counts_per_rev: int = COUNTS_PER_REV
     keepalive: float | None = 0.1       # s between resends of a non-zero motion command; None = off
+    command_deadline: float = 0.5       # s: the keepalive repeats a command only this long after the application
+                                        # last set it, then stops the robot (the rescue loop refreshes every 0.05 s)
+    gyro_bias_gain: float = 0.1         # EMA gain of the gyro bias estimate per stationary TELEMETRY read
     connect_timeout: float | None = 3.0 # s to wait for the first PONG (an Arduino Mega resets on open); None = skip
     params: OmniDriveParams = field(default_factory=OmniDriveParams)
 
@@ -70,6 +93,10 @@ class SerialDriveConfig:
             raise ValueError(f"counts_per_rev must be > 0, got {self.counts_per_rev}")
         if self.keepalive is not None and not 0 < self.keepalive < P.COMMAND_TIMEOUT_S:
             raise ValueError(f"keepalive must be in (0, {P.COMMAND_TIMEOUT_S}) s or None, got {self.keepalive}")
+        if not self.command_deadline > (self.keepalive or 0.0):
+            raise ValueError(f"command_deadline must be > keepalive ({self.keepalive} s), got {self.command_deadline}")
+        if not 0 < self.gyro_bias_gain <= 1:
+            raise ValueError(f"gyro_bias_gain must be in (0, 1], got {self.gyro_bias_gain}")
 
 
 @dataclass
@@ -78,9 +105,10 @@ class LinkStats:
 
     commands: int = 0
     retries: int = 0
-    stale_replies: int = 0      # CRC-valid replies whose seq did not match the outstanding command
+    stale_replies: int = 0      # CRC-valid replies whose seq or type did not match the outstanding command
     bad_replies: int = 0        # CRC-valid frames that did not decode
     keepalives: int = 0
+    deadline_stops: int = 0     # STOPs sent because the application stopped refreshing its command
 
 
 def _fixed(value: float, scale: float, name: str, lo: int = -32768, hi: int = 32767) -> int:
@@ -101,16 +129,24 @@ class SerialDrive(DriveBase):
         self.stats = LinkStats()
         self.parser = P.FrameParser()
         self.board: P.Pong | None = None        # last PONG (firmware version, PWM top)
+        self.speed_limited = False              # the last motion command was scaled to the wheel-speed limit
         self._seq = 0
         self._lock = threading.RLock()
         self._active: P.Message | None = None   # non-zero motion command kept alive
         self._last_motion = 0.0                 # when the kept-alive command was last sent (monotonic s)
+        self._last_set = 0.0                    # when the application last set it (monotonic s)
+        self.gyro_bias: float | None = None     # rad/s, learned while standing still
+        self._bumped = 0                        # bumper bits seen pressed since the last status()
         self._bg_error: DriveLinkError | None = None
         self._closed = threading.Event()
         try:
-            self._ser = serial.serial_for_url(port, baudrate=self.config.baudrate, timeout=0.01,
-                                              write_timeout=1.0)
+            # exclusive: an advisory flock on POSIX; a second SerialDrive (any process) is refused
+            self._ser = serial.serial_for_url(port, baudrate=self.config.baudrate, timeout=0.01, write_timeout=1.0,
+                                              exclusive=True if os.name == "posix" else None)
         except (serial.SerialException, OSError, ValueError) as e:
+            if getattr(e, "errno", None) in (errno.EWOULDBLOCK, errno.EAGAIN):     # pyserial's failed flock
+                raise DriveLinkError(f"drive serial port {port!r} is in use by another program (another SerialDrive "
+                                     f"or ssl-robot?): only one may command the motors") from e
             raise DriveLinkError(f"drive serial port {port!r} cannot be opened: {e}") from e
         try:
             if self.config.connect_timeout is not None:
@@ -126,7 +162,9 @@ class SerialDrive(DriveBase):
 
     # ----------------------------------------------------------------- DriveBase
     def set_twist(self, vx: float, vy: float, omega: float) -> None:
-        """Body twist (m/s, m/s, rad/s, robot frame); the MCU scales it to the wheel-speed limit."""
+        """Body twist (m/s, m/s, rad/s, robot frame); the MCU scales it to the wheel-speed limit.
+
+        Held while the application sets it again within ``config.command_deadline`` s."""
         msg = P.SetTwist(_fixed(vx, 1000, "vx (m/s)"), _fixed(vy, 1000, "vy (m/s)"),
                          _fixed(omega, 1000, "omega (rad/s)"))
         self._motion(msg, moving=any((msg.vx_mm_s, msg.vy_mm_s, msg.omega_mrad_s)))
@@ -154,10 +192,15 @@ class SerialDrive(DriveBase):
                              wheel_speeds=np.asarray(t.encoder_rate, dtype=float) * (k / P.ENCODER_WINDOW_S))
 
     def status(self) -> DriveStatus:
-        f = self.telemetry().fault_flags
+        """Faults, stall, bumpers (pressed now or since the last TELEMETRY) and the yaw rate (rad/s, CCW
+        positive about the robot's +z; gyro bias removed once learned; None without a working gyro)."""
+        t = self.telemetry()
+        f = t.fault_flags
         names = tuple(n for bit, n in P.FAULT_NAMES.items()
                       if f & bit and bit not in (P.Fault.SPEED_LIMITED, P.Fault.STALL))
-        return DriveStatus(bumper=False, stalled=bool(f & P.Fault.STALL), faults=names)
+        yaw_rate = t.gyro_z / P.GYRO_COUNTS_PER_RAD_S - (self.gyro_bias or 0.0) if t.gyro_ok else None
+        bumped, self._bumped = self._bumped, 0
+        return DriveStatus(bumper=bool(bumped), stalled=bool(f & P.Fault.STALL), faults=names, yaw_rate=yaw_rate)
 
     def close(self) -> None:
         if self._closed.is_set():
@@ -182,11 +225,21 @@ class SerialDrive(DriveBase):
         rtt = time.perf_counter() - t0
         if pong.nonce != nonce:
             raise DriveLinkError(f"drive on {self.port!r} echoed nonce {pong.nonce}, expected {nonce}")
+        if pong.protocol_version != P.PROTOCOL_VERSION:
+            raise DriveProtocolError(f"drive on {self.port!r} speaks protocol version {pong.protocol_version}, this "
+                                     f"host speaks {P.PROTOCOL_VERSION}: flash firmware/ (make -C firmware flash)")
         self.board = pong
         return rtt
 
     def telemetry(self) -> P.Telemetry:
-        return self._transact(P.GetTelemetry(), P.MsgType.TELEMETRY)
+        t = self._transact(P.GetTelemetry(), P.MsgType.TELEMETRY)
+        self._bumped |= t.bumpers_pressed         # kept for status(): odometry() reads TELEMETRY too
+        if t.gyro_ok and not any(t.duty) and not any(t.encoder_rate):
+            # standing still (nothing driven, no encoder count in the last 50 ms): the gyro reads its bias
+            rate = t.gyro_z / P.GYRO_COUNTS_PER_RAD_S
+            b = self.gyro_bias
+            self.gyro_bias = rate if b is None else b + self.config.gyro_bias_gain * (rate - b)
+        return t
 
     def clear_faults(self, mask: int = 0xFFFF) -> None:
         self._transact(P.ClearFaults(mask), P.MsgType.ACK)
@@ -198,7 +251,7 @@ class SerialDrive(DriveBase):
             try:
                 self.ping()
                 return
-            except DriveCommandError:
+            except (DriveCommandError, DriveProtocolError):
                 raise
             except DriveLinkError as e:
                 if self._ser is None or not self._ser.is_open or time.monotonic() >= deadline:
@@ -206,8 +259,9 @@ class SerialDrive(DriveBase):
 
     def _motion(self, msg: P.Message, moving: bool) -> None:
         with self._lock:
-            self._transact(msg, P.MsgType.ACK)
-            self._last_motion = time.monotonic()
+            ack = self._transact(msg, P.MsgType.ACK)
+            self.speed_limited = bool(ack.flags & P.ACK_SPEED_LIMITED)
+            self._last_motion = self._last_set = time.monotonic()
             self._active = msg if moving else None
 
     def _keepalive_loop(self) -> None:
@@ -216,13 +270,21 @@ class SerialDrive(DriveBase):
             with self._lock:
                 if self._active is None or self._closed.is_set():
                     continue
-                # only motion commands feed the MCU's command watchdog (telemetry polls do not)
-                if time.monotonic() - self._last_motion < period:
-                    continue
+                now = time.monotonic()
                 try:
-                    self._transact(self._active, P.MsgType.ACK)
-                    self._last_motion = time.monotonic()
-                    self.stats.keepalives += 1
+                    if now - self._last_set > self.config.command_deadline:
+                        # the application stopped refreshing its command: it hangs or forgot; never drive on
+                        log.warning("drive on %r: %s not refreshed for %.2f s (deadline %.2f s): stopping",
+                                    self.port, self._active.TYPE.name, now - self._last_set,
+                                    self.config.command_deadline)
+                        self._active = None
+                        self.stats.deadline_stops += 1
+                        self._transact(P.Stop(), P.MsgType.ACK)
+                    elif now - self._last_motion >= period:
+                        # only motion commands feed the MCU's command watchdog (telemetry polls do not)
+                        self._transact(self._active, P.MsgType.ACK)
+                        self._last_motion = time.monotonic()
+                        self.stats.keepalives += 1
                 except DriveLinkError as e:
                     self._bg_error = e
                     self._active = None
@@ -246,7 +308,7 @@ class SerialDrive(DriveBase):
                 if attempt:
                     self.stats.retries += 1
                 self._write(data)
-                reply = self._await_reply(seq, time.monotonic() + self.config.reply_timeout)
+                reply = self._await_reply(msg.TYPE, seq, expect, time.monotonic() + self.config.reply_timeout)
                 if reply is None:
                     continue
                 if isinstance(reply, P.Nak):
@@ -256,9 +318,6 @@ class SerialDrive(DriveBase):
                         reason = reply.reason
                     raise DriveCommandError(f"drive on {self.port!r} rejected {msg.TYPE.name} "
                                             f"(seq {seq}): {getattr(reason, 'name', reason)}", reason)
-                if reply.TYPE != expect or (isinstance(reply, P.Ack) and reply.of_type != msg.TYPE):
-                    raise DriveLinkError(f"drive on {self.port!r} answered {msg.TYPE.name} (seq {seq}) "
-                                         f"with {reply.TYPE.name}, expected {expect.name}")
                 return reply
             raise DriveLinkError(f"no reply from the drive on {self.port!r} to {msg.TYPE.name} (seq {seq}) "
                                  f"after {attempts} attempts of {self.config.reply_timeout} s")
@@ -271,28 +330,42 @@ class SerialDrive(DriveBase):
         except _LINK_ERRORS as e:
             raise DriveLinkError(f"drive serial port {self.port!r} failed on write: {e}") from e
 
-    def _await_reply(self, seq: int, deadline: float) -> P.Message | None:
+    def _await_reply(self, cmd_type: int, seq: int, expect: P.MsgType, deadline: float) -> P.Message | None:
+        """The reply to command ``cmd_type`` sent with ``seq``: a frame with that seq that is ``expect``
+        (an ACK must name ``cmd_type``) or a NAK naming ``cmd_type``; None at the deadline. Anything else
+        (a late reply to an earlier command that had the same seq) is counted as stale and skipped."""
         while True:
             now = time.monotonic()
             if now >= deadline:
-                return None
+                # give up an incomplete candidate only now, and rescan the bytes it held: a gap mid-reply
+                # on a loaded host or USB link is no reason to lose the reply (it once cost a resend)
+                return self._reply_in(self.parser.drop_partial(), cmd_type, seq, expect)
             try:
                 self._ser.timeout = min(0.01, deadline - now)
                 chunk = self._ser.read(max(1, self._ser.in_waiting))
             except (*_LINK_ERRORS, TypeError) as e:
                 # pyserial raises TypeError/OSError from a port whose device disappeared mid-read
                 raise DriveLinkError(f"drive serial port {self.port!r} failed on read: {e}") from e
-            # a pause mid-frame is an inter-byte timeout: give up the partial frame and rescan it
-            frames = self.parser.feed(chunk) if chunk else self.parser.drop_partial()
-            for fr in frames:
-                if fr.msg_type < 0x80:
-                    continue                     # a command (our own echo on loop://): not a reply
-                try:
-                    msg = fr.decode()
-                except P.ProtocolError:
-                    self.stats.bad_replies += 1
-                    continue
-                if fr.seq != seq:
-                    self.stats.stale_replies += 1
-                    continue
-                return msg
+            if chunk and (reply := self._reply_in(self.parser.feed(chunk), cmd_type, seq, expect)) is not None:
+                return reply
+
+    def _reply_in(self, frames: list[P.Frame], cmd_type: int, seq: int, expect: P.MsgType) -> P.Message | None:
+        for fr in frames:
+            if fr.msg_type < 0x80:
+                continue                     # a command (our own echo on loop://): not a reply
+            try:
+                msg = fr.decode()
+            except P.ProtocolError:
+                self.stats.bad_replies += 1
+                continue
+            if fr.seq != seq or not _answers(msg, cmd_type, expect):
+                self.stats.stale_replies += 1
+                continue
+            return msg
+        return None
+
+
+def _answers(reply: P.Message, cmd_type: int, expect: P.MsgType) -> bool:
+    if isinstance(reply, (P.Ack, P.Nak)):
+        return reply.of_type == cmd_type and (reply.TYPE == expect or isinstance(reply, P.Nak))
+    return reply.TYPE == expect

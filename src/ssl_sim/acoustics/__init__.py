@@ -8,6 +8,8 @@ Public API::
 
 World frame metres; levels in dB SPL re 20 uPa (sources: at 1 m, free field, while sounding).
 """
+from .diffraction import barrier_attenuation_db
+from .ego_noise import EgoNoise, EgoNoiseConfig
 from .materials import (AcousticMaterial, get_material, known_materials, register_material,
                         uniform_material)
 from .noise import AmbientNoise, DiffuseNoiseField
@@ -22,7 +24,7 @@ from .voices import SPEAKERS, Speaker, continuous_voice, synth_knock, synth_moan
 
 __all__ = [
     "AcousticConfig", "AcousticMaterial", "AcousticScene", "AcousticSimulator", "AmbientNoise", "ArrayMount",
-    "ClippingWarning", "DiffuseNoiseField", "EventStream", "ImageSet", "LoopedSignal", "PAPER_LEVEL_DB_SPL",
+    "ClippingWarning", "DiffuseNoiseField", "EgoNoise", "EgoNoiseConfig", "barrier_attenuation_db", "EventStream", "ImageSet", "LoopedSignal", "PAPER_LEVEL_DB_SPL",
     "RobotPose", "SPEAKERS", "Sensor", "SensorConfig", "ShapedNoise", "SignalStream", "SoundSource", "Speaker",
     "Surface", "TimeKeyedNoise", "continuous_voice", "generator_noise", "get_material", "known_materials",
     "noise_source", "point_at", "pump_noise", "register_material", "rotation_matrix", "synth_knock", "synth_moan",

@@ -43,13 +43,22 @@ class DiffuseNoiseField:
     The field is computed in fixed frames aligned to absolute sample indices (overlap-save
     with margins), so any block is identical however the timeline is cut. The mixing depends
     only on inter-microphone distances, so a rigid array hears the same realisation at every
-    pose (the field is statistically isotropic and homogeneous)."""
+    pose (the field is statistically isotropic and homogeneous).
+
+    ``loop_frames``: if set, the field repeats every ``loop_frames * FRAME`` samples (frame ``k`` is frame
+    ``k mod loop_frames``; a discontinuity at each wrap): the frames are then computed once and cached -
+    a cheaper field for the environment's fast fidelity, statistically the same."""
 
     FRAME = 8192
+    CACHE = 32  # frames kept
     _PAD = 512  # margin for the (non-causal, decaying) coherence-mixing filters
 
-    def __init__(self, ambient: AmbientNoise, fs: int, seed: int, c: float = 343.0) -> None:
+    def __init__(self, ambient: AmbientNoise, fs: int, seed: int, c: float = 343.0,
+                 loop_frames: int | None = None) -> None:
+        if loop_frames is not None and not 1 <= loop_frames <= self.CACHE:
+            raise ValueError(f"loop_frames: expected None or 1..{self.CACHE}, got {loop_frames}")
         self.ambient, self.fs, self.c = ambient, int(fs), float(c)
+        self.loop_frames = loop_frames
         self.seed = int(seed)
         h = _spectrum_fir(ambient.spectrum, self.fs)
         self.h = h / np.sqrt(np.sum(h**2))
@@ -60,6 +69,8 @@ class DiffuseNoiseField:
         self._frames: OrderedDict[int, np.ndarray] = OrderedDict()
 
     def _frame(self, k: int, mics: np.ndarray) -> np.ndarray:
+        if self.loop_frames is not None:
+            k = k % self.loop_frames
         fr = self._frames.get(k)
         if fr is not None:
             self._frames.move_to_end(k)
@@ -78,7 +89,7 @@ class DiffuseNoiseField:
         y = sfft.irfft(np.einsum("fij,jf->if", self._mix, sfft.rfft(w, n_fft, axis=1)), n_fft, axis=1)
         fr = self.p_rms * y[:, pad + taps: pad + taps + F]
         self._frames[k] = fr
-        if len(self._frames) > 32:
+        if len(self._frames) > self.CACHE:
             self._frames.popitem(last=False)
         return fr
 

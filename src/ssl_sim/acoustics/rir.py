@@ -22,6 +22,8 @@ where the early part's smoothed energy falls below the diffuse expectation.
 """
 from __future__ import annotations
 
+from functools import lru_cache
+
 import numpy as np
 from scipy import fft as sfft
 
@@ -45,6 +47,12 @@ def band_weights(freqs_hz: np.ndarray, centers=OCTAVE_CENTERS_HZ) -> np.ndarray:
     w[lo, cols] += np.cos(0.5 * np.pi * frac) ** 2
     w[hi, cols] += np.sin(0.5 * np.pi * frac) ** 2
     return w
+
+
+@lru_cache(maxsize=32)
+def _band_weights_fft(n_fft: int, fs: int) -> np.ndarray:
+    """:func:`band_weights` on the rfft bins of ``n_fft`` at ``fs`` (cached: few sizes recur)."""
+    return band_weights(np.fft.rfftfreq(n_fft, 1.0 / fs))
 
 
 def _frac_kernel(delay: np.ndarray, half: int = FRAC_HALF_TAPS) -> tuple[np.ndarray, np.ndarray]:
@@ -77,9 +85,8 @@ def early_rir(image_positions: np.ndarray, reflection: np.ndarray, mics: np.ndar
         wts = (ker * refl[:, :1, None]).ravel()
         return np.bincount(flat_idx, wts, minlength=n_mics * out_len).reshape(n_mics, out_len)
     n_fft = sfft.next_fast_len(out_len + 2 * n_pre)
-    freqs = np.fft.rfftfreq(n_fft, 1.0 / fs)
-    bw = band_weights(freqs)
-    spec = np.zeros((n_mics, freqs.size), complex)
+    bw = _band_weights_fft(n_fft, fs)
+    spec = np.zeros((n_mics, n_fft // 2 + 1), complex)
     for b in range(refl.shape[1]):
         wts = (ker * refl[:, b, None, None]).ravel()
         train = np.bincount(flat_idx, wts, minlength=n_mics * out_len).reshape(n_mics, out_len)

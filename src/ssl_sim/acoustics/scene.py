@@ -146,6 +146,12 @@ class AcousticScene:
                 raise ValueError(f"{where}: {exc}") from None
 
         wall_m = mat(room.wall_material, "world.room.wall_material")
+        f_open = float(getattr(room, "wall_open_fraction", 0.0))
+        if f_open > 0 and material_override is None:
+            # Openings spread over the walls: the area-weighted absorption of wall and hole (alpha = 1).
+            wall_m = AcousticMaterial(f"{wall_m.name} ({100 * f_open:.0f} % open)",
+                                      tuple(f_open + (1 - f_open) * np.asarray(wall_m.absorption)),
+                                      wall_m.scattering, wall_m.description)
         floor_m = mat(room.floor_material, "world.room.floor_material")
         ceil_m = mat(room.ceiling_material, "world.room.ceiling_material")
         self.room_materials = (wall_m, wall_m, wall_m, wall_m, floor_m, ceil_m)
@@ -259,6 +265,20 @@ class AcousticScene:
                     f"size {list(b.size)}); sources and microphones must be in air"
                 )
         return p
+
+    def inside_air_all(self, points, margin: float = 0.0) -> bool:
+        """Whether all ``points`` (n, 3) (world, m) are finite, in the room and outside every modelled obstacle,
+        with ``margin`` (m) clearance (vectorised :meth:`check_point` without the error message)."""
+        p = np.asarray(points, float).reshape(-1, 3)
+        if not np.all(np.isfinite(p)) or not np.all((p >= margin) & (p <= self.size - margin)):
+            return False
+        if not self.boxes:
+            return True
+        c = np.array([b.center for _, b in self.boxes])
+        r = np.array([b.rotation for _, b in self.boxes])
+        h = np.array([b.size for _, b in self.boxes]) / 2 + margin
+        local = np.einsum("bji,nbj->nbi", r, p[:, None, :] - c[None])
+        return not np.any(np.all(np.abs(local) <= h[None], axis=-1))
 
     def inside_air(self, point, margin: float = 0.0) -> bool:
         p = np.asarray(point, float)

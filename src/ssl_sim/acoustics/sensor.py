@@ -68,7 +68,7 @@ class Sensor:
 
     HALF_TAPS = 16
 
-    def __init__(self, config: SensorConfig, n_channels: int, seed: int) -> None:
+    def __init__(self, config: SensorConfig, n_channels: int, seed: int, loop_chunks: int | None = None) -> None:
         chans = sorted(c for grp in config.device_channels for c in grp)
         if chans != list(range(n_channels)):
             uniform = len(set(config.device_offset_samples)) == 1 and len(set(config.clock_drift_ppm)) == 1
@@ -86,7 +86,7 @@ class Sensor:
         rng = np.random.default_rng([int(seed) & 0xFFFFFFFF, 0x6A1E])
         self.gain_db = rng.normal(0.0, config.gain_mismatch_db, n_channels) if config.gain_mismatch_db > 0 else np.zeros(n_channels)
         self.gain = 10 ** (self.gain_db / 20)
-        self.noise = TimeKeyedNoise(seed, stream=0x5E1F, channels=n_channels)
+        self.noise = TimeKeyedNoise(seed, stream=0x5E1F, channels=n_channels, loop_chunks=loop_chunks)
         self.noise_rms_pa = P_REF * 10 ** (config.self_noise_db_spl / 20)
 
     def device_timing(self, n0: int, n: int) -> list[tuple[tuple[int, ...], np.ndarray]]:

@@ -32,11 +32,17 @@ class TimeKeyedNoise:
     seeded by ``(seed, stream, k)``; ``channels`` independent channels per stream.
     """
 
-    def __init__(self, seed: int, stream: int = 0, channels: int = 1, chunk: int = 8192) -> None:
+    def __init__(self, seed: int, stream: int = 0, channels: int = 1, chunk: int = 8192,
+                 loop_chunks: int | None = None) -> None:
         self.seed, self.stream, self.channels, self.chunk = int(seed), int(stream), int(channels), int(chunk)
+        if loop_chunks is not None and not 1 <= loop_chunks <= 64:
+            raise ValueError(f"loop_chunks: expected None or 1..64 (the cache), got {loop_chunks}")
+        self.loop_chunks = loop_chunks  # repeat every loop_chunks chunks (cheap noise: all cached)
         self._cache: OrderedDict[int, np.ndarray] = OrderedDict()
 
     def _chunk(self, k: int) -> np.ndarray:
+        if self.loop_chunks is not None:
+            k = k % self.loop_chunks
         c = self._cache.get(k)
         if c is None:
             c = _rng(self.seed, self.stream, k).standard_normal((self.channels, self.chunk))

@@ -8,7 +8,8 @@ at a fixed pose, so consecutive listen steps of a continuing voice are continuou
 Pipeline per listen step:
 1. room impulse responses per (source, microphone) - early part from the image-source model
    (pyroomacoustics engine on the room + obstacle faces), late part a diffuse tail with the
-   room's Eyring decay (see :mod:`.rir`); cached per pose (positions rounded to 0.1 mm);
+   room's Eyring decay (see :mod:`.rir`); paths an obstacle blocks bend over/around its edges
+   (:mod:`.diffraction`); cached per pose (positions rounded to 0.1 mm);
 2. each source's time-keyed signal, scaled to its level (Pa at 1 m), convolved (FFT) with its RIRs;
 3. diffuse ambient noise (:mod:`.noise`);
 4. the sensor chain (:mod:`.sensor`): self-noise, gain mismatch, device timing, 16-bit ADC.
@@ -25,6 +26,7 @@ from scipy import fft as sfft
 
 from ssl_sim.world import World
 
+from .diffraction import BoxSet, diffracted_arrivals, room_images
 from .materials import eyring_absorption_for_rt60, uniform_material
 from .noise import AmbientNoise, DiffuseNoiseField
 from .pose import ArrayMount, RobotPose
@@ -32,6 +34,10 @@ from .rir import FRAC_HALF_TAPS, DiffuseTail, early_rir, tail_gain
 from .scene import AcousticScene, ImageSet
 from .sensor import Sensor, SensorConfig
 from .sources import PAPER_LEVEL_DB_SPL, SoundSource, victim_source
+
+
+#: Default RIR length cap (s).
+DEFAULT_MAX_RIR_S = 4.0
 
 
 @dataclass(frozen=True)
@@ -46,6 +52,10 @@ class AcousticConfig:
     the array centre snapped to this grid (the 15 cm array shares one visibility set; delays and
     amplitudes are exact per microphone). ``position_quantum_m``: microphone positions are
     rounded to this before simulating (cache key). ``victim_*``: defaults for ``world.victims``.
+    ``diffraction``: add the paths bent over/around an obstacle that blocks the direct sound or a
+    first-order wall reflection (ISO 9613-2 barrier attenuation, see :mod:`.diffraction`).
+    ``noise_loop_s``: if set, the ambient field and the sensor self-noise repeat with this period (rounded
+    up to 8192-sample frames, at most 16 s): computed once, then cached - the env's fast fidelity.
     """
 
     fs: int = 16000
@@ -54,7 +64,7 @@ class AcousticConfig:
     ism_budget: float = 3e7
     late_reverb: bool = True
     rt60_s: float | None = None
-    max_rir_s: float = 4.0
+    max_rir_s: float = DEFAULT_MAX_RIR_S
     visibility_grid_m: float = 0.05
     position_quantum_m: float = 1e-4
     min_obstacle_extent_m: float = 0.05
@@ -62,6 +72,8 @@ class AcousticConfig:
     sensor: SensorConfig = field(default_factory=SensorConfig)
     seed: int = 0
     rir_cache_size: int = 32
+    diffraction: bool = True
+    noise_loop_s: float | None = None
     victim_sound: str = "calls"
     victim_level_db_spl: float = PAPER_LEVEL_DB_SPL
 
@@ -74,23 +86,39 @@ class AcousticConfig:
             raise ValueError(f"AcousticConfig.max_rir_s: expected > 0 s, got {self.max_rir_s}")
         if self.rt60_s is not None and (not np.isfinite(self.rt60_s) or self.rt60_s < 0):
             raise ValueError(f"AcousticConfig.rt60_s: expected None or a time >= 0 s, got {self.rt60_s}")
+        if self.noise_loop_s is not None and not 0 < self.noise_loop_s <= 16.384:
+            raise ValueError(f"AcousticConfig.noise_loop_s: expected None or 0 < s <= 16.384, got {self.noise_loop_s}")
         if self.position_quantum_m <= 0 or self.visibility_grid_m <= 0:
             raise ValueError("AcousticConfig.position_quantum_m and visibility_grid_m must be > 0 m")
 
 
 class _PoseRirs:
-    """RIRs (n_sources, n_mics, L) at one pose and their spectra per FFT size."""
+    """RIRs (n_sources, n_mics, L) at one pose, before the sources' burial filters, and their spectra per
+    FFT size with the burial filters applied (zero-phase: one multiplication in the convolution's domain)."""
 
-    def __init__(self, rirs: np.ndarray) -> None:
-        self.rirs = rirs
+    def __init__(self, rirs: np.ndarray, sources: Sequence[SoundSource], fs: int) -> None:
+        self.rirs, self.sources, self.fs = rirs, sources, fs
         self.spectra: dict[int, np.ndarray] = {}
 
     def spectrum(self, n_fft: int) -> np.ndarray:
         s = self.spectra.get(n_fft)
         if s is None:
             s = sfft.rfft(self.rirs, n_fft, axis=-1)
+            freqs = np.fft.rfftfreq(n_fft, 1.0 / self.fs)
+            for k, src in enumerate(self.sources):
+                resp = src.burial_response(freqs)
+                if resp is not None:
+                    s[k] *= resp
             self.spectra = {n_fft: s}  # one block size at a time is the normal case
         return s
+
+    def buried_rirs(self) -> np.ndarray:
+        """The RIRs with the burial filters applied (time domain)."""
+        if not any(src.buried > 0 for src in self.sources):
+            return self.rirs
+        L = self.rirs.shape[-1]
+        n_fft = sfft.next_fast_len(L)
+        return sfft.irfft(self.spectrum(n_fft), n_fft, axis=-1)[..., :L]
 
 
 class AcousticSimulator:
@@ -124,8 +152,15 @@ class AcousticSimulator:
                 f"room RT60 up to {self.rt60_bands.max():.2f} s exceeds max_rir_s={cfg.max_rir_s} s: "
                 "the reverberant tail is truncated", stacklevel=2)
         self.rir_length = self.N_PRE + int(np.ceil(min(need, cfg.max_rir_s) * cfg.fs))
+        # The diffuse tail is drawn at the length the default cap would give and then cut to rir_length, so
+        # a shorter max_rir_s (the env's fast fidelity) truncates the same realisation instead of drawing another.
+        self._tail_draw_length = max(self.rir_length - self.N_PRE,
+                                     int(np.ceil(min(need, DEFAULT_MAX_RIR_S) * cfg.fs)))
+        self._boxes = BoxSet.from_boxes([b for _, b in scene.boxes])
+        self._wall_reflection = np.array([m.reflection_amplitude for m in scene.room_materials])
         self._sensors: dict[int, Sensor] = {}
         self._images: OrderedDict[tuple, ImageSet] = OrderedDict()
+        self._first_missing: dict[tuple, float] = {}
         self._tails: dict[int, list[tuple[np.ndarray, DiffuseTail]]] = {}
         self._rirs: OrderedDict[bytes, _PoseRirs] = OrderedDict()
         self._sources: list[SoundSource] = []
@@ -134,7 +169,13 @@ class AcousticSimulator:
                                      level_db_spl=cfg.victim_level_db_spl) for i, v in enumerate(world.victims)]
         for s in sources:
             self.add_source(s)
-        self.ambient = DiffuseNoiseField(cfg.ambient, cfg.fs, cfg.seed, cfg.c) if cfg.ambient is not None else None
+        self._loop = None if cfg.noise_loop_s is None else int(np.ceil(cfg.noise_loop_s * cfg.fs / DiffuseNoiseField.FRAME))
+        self.ambient = (DiffuseNoiseField(cfg.ambient, cfg.fs, cfg.seed, cfg.c, loop_frames=self._loop)
+                        if cfg.ambient is not None else None)
+
+    def scene_materials_rt60(self) -> np.ndarray:
+        """Eyring RT60 (s) per octave band that the world's own surface materials give (whatever ``rt60_s`` says)."""
+        return AcousticScene(self.world, self.config.min_obstacle_extent_m).rt60(self.config.c)
 
     # ------------------------------------------------------------------ sources
     @property
@@ -175,8 +216,26 @@ class AcousticSimulator:
             self._images[key] = imgs
             if len(self._images) > 512:
                 self._images.popitem(last=False)
-        first_missing = self.scene.first_missing_distance(src, centre, self.ism_order, cfg.c) if cfg.late_reverb else np.inf
+        # Where the tail starts (path length of the first reflection the model misses), at the visibility grid
+        # point: within 5 cm (0.15 ms) of the exact start, and cached with the image set.
+        fm_key = (k, tuple(np.round(self._quantise(centre, cfg.visibility_grid_m), 6)))
+        first_missing = self._first_missing.get(fm_key) if cfg.late_reverb else np.inf
+        if first_missing is None:
+            first_missing = self.scene.first_missing_distance(src, self._quantise(centre, cfg.visibility_grid_m),
+                                                              self.ism_order, cfg.c)
+            self._first_missing[fm_key] = first_missing
+            if len(self._first_missing) > 512:
+                self._first_missing.pop(next(iter(self._first_missing)))
         return imgs, first_missing
+
+    def _diffracted(self, k: int, imgs: ImageSet, centre: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """Virtual sources of the diffracted arrivals of source ``k`` at the array ``centre`` for the direct
+        path and first-order wall reflections the image-source set lacks (blocked by an obstacle)."""
+        src = np.asarray(self._sources[k].position)
+        cand, _, _ = room_images(src, self.scene.size, self._wall_reflection)
+        low = imgs.positions[imgs.order <= 1]
+        present = (np.linalg.norm(cand[:, None] - low[None], axis=-1) < 1e-3).any(axis=1)
+        return diffracted_arrivals(src, centre, self._boxes, self.scene.size, self._wall_reflection, present)
 
     def _tail(self, k: int, mics: np.ndarray) -> DiffuseTail:
         # Rigid array: one tail per source serves every pose (matched on inter-mic distances within 2 mm).
@@ -186,14 +245,16 @@ class AcousticSimulator:
                 return t
         cfg = self.config
         rng = np.random.default_rng([cfg.seed & 0xFFFFFFFF, 0x7A11, k])
-        t = DiffuseTail(self.rt60_bands, self.scene.volume, cfg.fs, cfg.c, self.rir_length - self.N_PRE, rng, mics)
+        t = DiffuseTail(self.rt60_bands, self.scene.volume, cfg.fs, cfg.c, self._tail_draw_length, rng, mics)
+        L = self.rir_length - self.N_PRE
+        t.tail, t.expected_energy, t.length = t.tail[:, :L], t.expected_energy[:L], L
         self._tails.setdefault(k, []).append((d, t))
         return t
 
     def impulse_responses(self, mic_positions_world) -> np.ndarray:
         """RIRs (n_sources, n_mics, rir_length) in Pa per (Pa at 1 m); index 0 is ``N_PRE`` samples before emission."""
         mics = self._check_mics(mic_positions_world)
-        return self._pose_rirs(mics).rirs
+        return self._pose_rirs(mics).buried_rirs()
 
     def _pose_rirs(self, mics: np.ndarray) -> _PoseRirs:
         cfg = self.config
@@ -208,20 +269,20 @@ class AcousticSimulator:
         out = np.zeros((len(self._sources), mics.shape[0], L))
         for k, src in enumerate(self._sources):
             imgs, first_missing = self._image_set(k, centre)
-            if imgs.positions.shape[0]:
-                d_max = float(np.max(np.linalg.norm(imgs.positions - centre, axis=1))) + 0.2
+            positions, reflection = imgs.positions, imgs.reflection
+            if cfg.diffraction and len(self._boxes):
+                dpos, dref = self._diffracted(k, imgs, centre)
+                positions, reflection = np.vstack([positions, dpos]), np.vstack([reflection, dref])
+            if positions.shape[0]:
+                d_max = float(np.max(np.linalg.norm(positions - centre, axis=1))) + 0.2
                 l_early = min(L, n_pre + int(np.ceil(d_max / cfg.c * cfg.fs)) + FRAC_HALF_TAPS + 2 * n_pre)
-                out[k, :, :l_early] = early_rir(imgs.positions, imgs.reflection, mics, cfg.fs, cfg.c, n_pre, l_early)
+                out[k, :, :l_early] = early_rir(positions, reflection, mics, cfg.fs, cfg.c, n_pre, l_early)
             if cfg.late_reverb and self.rt60_bands.max() > 0:
                 tail = self._tail(k, mics)
                 start = int(round(first_missing / cfg.c * cfg.fs)) if np.isfinite(first_missing) else L
                 g = tail_gain(out[k, :, n_pre:], tail.expected_energy, start, cfg.fs)
                 out[k, :, n_pre:] += g * tail.tail
-            resp = src.burial_response(np.fft.rfftfreq(sfft.next_fast_len(L), 1.0 / cfg.fs))
-            if resp is not None:
-                n_fft = sfft.next_fast_len(L)
-                out[k] = sfft.irfft(sfft.rfft(out[k], n_fft, axis=-1) * resp, n_fft, axis=-1)[:, :L]
-        pr = _PoseRirs(out)
+        pr = _PoseRirs(out, tuple(self._sources), cfg.fs)
         self._rirs[key] = pr
         if len(self._rirs) > cfg.rir_cache_size:
             self._rirs.popitem(last=False)
@@ -232,8 +293,9 @@ class AcousticSimulator:
         mics = np.asarray(mic_positions_world, float)
         if mics.ndim != 2 or mics.shape[1] != 3 or mics.shape[0] < 1:
             raise ValueError(f"mic_positions_world: expected shape (n_mics, 3) in world metres, got {mics.shape}")
-        for i, p in enumerate(mics):
-            self.scene.check_point(p, f"mic_positions_world[{i}]", margin=0.005)
+        if not self.scene.inside_air_all(mics, margin=0.005):  # fast path; the loop names the bad one
+            for i, p in enumerate(mics):
+                self.scene.check_point(p, f"mic_positions_world[{i}]", margin=0.005)
         return mics
 
     def pressure(self, mic_positions_world, n0: int, n: int, channels: Sequence[int] | None = None,
@@ -262,12 +324,14 @@ class AcousticSimulator:
     def _sensor(self, n_mics: int) -> Sensor:
         s = self._sensors.get(n_mics)
         if s is None:
-            s = self._sensors[n_mics] = Sensor(self.config.sensor, n_mics, self.config.seed)
+            s = self._sensors[n_mics] = Sensor(self.config.sensor, n_mics, self.config.seed, loop_chunks=self._loop)
         return s
 
-    def listen(self, mic_positions_world, duration_s: float, t0: float = 0.0) -> np.ndarray:
+    def listen(self, mic_positions_world, duration_s: float, t0: float = 0.0,
+               extra_pressure: np.ndarray | None = None) -> np.ndarray:
         """ADC output (n_mics, n) for simulation time ``[t0, t0 + duration_s)``, ``n = round(duration_s * fs)``:
-        int16 (default) or float32 per ``config.sensor.output``. ``mic_positions_world`` (n_mics, 3) m."""
+        int16 (default) or float32 per ``config.sensor.output``. ``mic_positions_world`` (n_mics, 3) m.
+        ``extra_pressure`` (n_mics, n) Pa: sound rendered elsewhere (the robot's ego-noise) added before the sensor."""
         cfg = self.config
         if not np.isfinite(duration_s) or duration_s <= 0:
             raise ValueError(f"duration_s: expected a duration > 0 s, got {duration_s}")
@@ -288,6 +352,10 @@ class AcousticSimulator:
                 b = int(np.ceil(times.max())) + h + 2
                 pch = self.pressure(mics, a, b - a, channels=chans)
                 p[list(chans)] = Sensor.interpolate(pch, a, times)
+        if extra_pressure is not None:
+            if np.shape(extra_pressure) != p.shape:
+                raise ValueError(f"extra_pressure: expected shape {p.shape} (n_mics, n) Pa, got {np.shape(extra_pressure)}")
+            p = p + extra_pressure
         return sensor.digitise(p, n0)
 
     def listen_pose(self, pose: RobotPose, duration_s: float, t0: float = 0.0, mount: ArrayMount | None = None) -> np.ndarray:

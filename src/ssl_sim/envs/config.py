@@ -13,10 +13,13 @@ FIDELITIES = ("fast", "full")
 #: AcousticConfig fields per fidelity. Both keep the same room model, diffuse late tail (same
 #: random realisation: its length depends on the RT60, not on the order), ambient noise and
 #: sensor; the fast mode stops the exact image-source model at order 2 instead of 3 (the tail
-#: fills the rest with the same expected energy). Measured: ``benchmarks/bench_env.py``.
+#: fills the rest with the same expected energy) and loops a 10.24 s realisation of the ambient
+#: noise and sensor self-noise (computed once per episode, then cached; same statistics). The
+#: fast mode also moves the robot kinematically (``SSLRescueEnv._drive_kinematic``). Measured:
+#: ``benchmarks/bench_env.py``.
 FIDELITY_ACOUSTICS: dict[str, dict[str, Any]] = {
     "full": {"ism_order": 3},
-    "fast": {"ism_order": 2},
+    "fast": {"ism_order": 2, "noise_loop_s": 10.24},
 }
 
 VICTIM_SOUNDS = ("continuous", "calls", "moans", "shouts", "knocks", "mixed")

@@ -4,7 +4,8 @@ One step (``EnvConfig``, defaults in brackets): the normalised action ``a`` in [
 scaled to a body twist ``(a0 * max_speed, a1 * max_speed, a2 * max_turn_rate)`` (robot frame:
 +x forward, +y left, CCW positive; [0.3 m/s, 1.2 rad/s]) and sent through
 ``robot.kinematics.twist_to_wheels`` (inverse kinematics, direction-keeping saturation) to the
-MuJoCo robot for ``control_s`` [0.5 s]; the robot stops, settles ``settle_s`` [0.1 s] and listens
+MuJoCo robot for ``control_s`` [0.5 s] (``fidelity="fast"``: the robot moves kinematically along that
+twist, no dynamics, see ``_drive_kinematic``); the robot stops, settles ``settle_s`` [0.1 s] and listens
 ``listen_s`` [0.25 s] standing still (``SimAudioSource``: acoustic simulation at the microphone
 positions of the physics model); ``ssl_core``'s SRP-PHAT localizer turns that audio into the
 observation. A step is 0.85 s of simulated time.
@@ -52,6 +53,7 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
+from robot.kinematics import forward_kinematics, integrate_pose, twist_to_wheels
 from robot.odometry import Odometry, wrap_angle
 from ssl_core.localizer import Localizer, LocalizerConfig
 from ssl_sim.acoustics import AcousticConfig, AcousticSimulator, AmbientNoise
@@ -60,6 +62,7 @@ from ssl_sim.envs.config import FIDELITY_ACOUSTICS, EnvConfig
 from ssl_sim.envs.navigation import GeodesicMap
 from ssl_sim.envs.voices import episode_victims
 from ssl_sim.physics import PhysicsError, SimRobot, generate_world, load_scene
+from ssl_sim.physics.robot_model import RobotModelConfig
 from ssl_sim.world import World
 
 FS = 16000
@@ -83,6 +86,20 @@ class _Episode:
     sources: list
     found_radius: float
     shortest_path: float
+
+    def clearance(self, x: float, y: float) -> float:
+        """Horizontal distance (m) from (x, y) to the nearest room wall or non-climbable obstacle footprint."""
+        boxes = [b for b in self.world.obstacles if not b.climbable]
+        lx, ly = self.world.room.size[:2]
+        d = min(x, y, lx - x, ly - y)
+        if boxes:
+            c = np.array([b.center[:2] for b in boxes])
+            yaw = np.array([b.yaw for b in boxes])
+            h = np.array([b.size[:2] for b in boxes]) / 2
+            dx, dy = x - c[:, 0], y - c[:, 1]
+            local = np.abs(np.stack([np.cos(yaw) * dx + np.sin(yaw) * dy, -np.sin(yaw) * dx + np.cos(yaw) * dy], 1))
+            d = min(d, float(np.min(np.linalg.norm(np.maximum(local - h, 0.0), axis=1))))
+        return d
 
 
 _LOCALIZERS: dict[LocalizerConfig, Localizer] = {}
@@ -179,7 +196,7 @@ class SSLRescueEnv(gym.Env):
                 sources = sc.sources(world, seed=acoustic_seed, fs=FS)
                 ac = sc.acoustic_config(seed=acoustic_seed)
                 order = min(ac.ism_order, FIDELITY_ACOUSTICS[cfg.fidelity]["ism_order"])
-                ac = replace(ac, ism_order=order)
+                ac = replace(ac, ism_order=order, noise_loop_s=FIDELITY_ACOUSTICS[cfg.fidelity].get("noise_loop_s"))
                 found_radius = sc.success_radius_m
             else:
                 if cfg.scene is not None:
@@ -264,11 +281,17 @@ class SSLRescueEnv(gym.Env):
         collided = False
         physics_error = None
         try:
-            robot.set_twist(*(a * self._twist_scale))
-            collided |= self._advance(cfg.control_s)
-            pose_drive = self._odo.update(robot.wheel_odometry())
-            robot.stop()
-            collided |= self._advance(cfg.settle_s)
+            if cfg.fidelity == "fast":
+                collided |= self._drive_kinematic(a * self._twist_scale, cfg.control_s)
+                pose_drive = self._odo.update(robot.wheel_odometry())
+                p = robot.pose()
+                robot.place(p.x, p.y, p.yaw, advance_s=cfg.settle_s)  # stops at once: nothing to settle
+            else:
+                robot.set_twist(*(a * self._twist_scale))
+                collided |= self._advance(cfg.control_s)
+                pose_drive = self._odo.update(robot.wheel_odometry())
+                robot.stop()
+                collided |= self._advance(cfg.settle_s)
             obs, collided_listening = self._listen_and_observe(pose0, pose_drive, collided)
             collided |= collided_listening
         except PhysicsError as exc:
@@ -308,6 +331,32 @@ class SSLRescueEnv(gym.Env):
             hit |= robot.bumper()
             self._track_path()
         return hit
+
+    def _drive_kinematic(self, twist: np.ndarray, duration: float) -> bool:
+        """Fast fidelity: move the robot along the commanded twist (after the drive's saturation) as a rigid
+        body, no dynamics, checking the bumper every ``_CHECK_DT``; at a contact the robot stays at its last
+        free pose for the rest of the step. Trades: no acceleration, wheel slip or rollers, no climbing over
+        debris (it glides level over climbable debris), no tipping. Returns whether the bumper closed."""
+        robot = self._ep.robot
+        wheels = twist_to_wheels(twist, robot.params)
+        body = forward_kinematics(wheels, robot.params)
+        p = robot.pose()
+        pose = np.array([p.x, p.y, p.yaw])
+        # Far from everything (more than the bumper's reach plus the distance driven): one move, no checks.
+        reach = RobotModelConfig().bumper_radius + 0.01 + float(np.hypot(*body[:2])) * duration
+        n = 1 if self._ep.clearance(p.x, p.y) > reach else max(1, int(math.ceil(duration / _CHECK_DT - 1e-9)))
+        dt = duration / n
+        angles = robot.wheel_odometry().wheel_angles
+        for k in range(n):
+            new, new_angles = integrate_pose(pose, body, dt), angles + wheels * dt
+            robot.place(*new, wheel_angles=new_angles, advance_s=dt)
+            if robot.bumper():
+                robot.place(*pose, wheel_angles=angles, advance_s=(n - k - 1) * dt)  # back off, wait out the step
+                self._track_path()
+                return True
+            pose, angles = new, new_angles
+            self._track_path()
+        return False
 
     def _track_path(self) -> None:
         xy = self._robot_xy()

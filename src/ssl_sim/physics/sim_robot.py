@@ -94,6 +94,7 @@ class SimRobot:
         self._wheel_qpos = np.array([m.jnt_qposadr[m.joint(j).id] for j in rm.WHEEL_JOINTS])
         self._wheel_dof = np.array([m.jnt_dofadr[m.joint(j).id] for j in rm.WHEEL_JOINTS])
         self._mics = np.array([m.site(rm.mic_site(i)).id for i in range(config.array.n_mics)])
+        self._motors = np.array([m.geom(f"motor{i}_body").id for i in range(3)])
         self._robot_bodies = self._subtree(self._base)
         self._floor = m.geom(FLOOR_GEOM).id
         self._bumper = m.geom(rm.BUMPER_GEOM).id
@@ -160,6 +161,22 @@ class SimRobot:
     @property
     def wheel_commands(self) -> np.ndarray:
         return self.data.ctrl[:3].copy()
+
+    def place(self, x: float, y: float, yaw: float, wheel_angles=None, advance_s: float = 0.0) -> None:
+        """Kinematic mode: put the base at ``(x, y)`` (world m), heading ``yaw`` (rad), level at its current
+        height, everything at rest; set the wheel encoders to ``wheel_angles`` (rad) if given; advance the
+        clock by ``advance_s`` without dynamics. Positions, sensors and contacts are then those of the new pose."""
+        m, d = self.model, self.data
+        adr = m.jnt_qposadr[m.joint("base_free").id]
+        d.qpos[adr:adr + 2] = (x, y)
+        d.qpos[adr + 3:adr + 7] = (np.cos(yaw / 2), 0.0, 0.0, np.sin(yaw / 2))
+        if wheel_angles is not None:
+            d.qpos[self._wheel_qpos] = np.asarray(wheel_angles, float)
+        d.qvel[:] = 0.0
+        d.time += float(advance_s)
+        self._requested = float(d.time)
+        mujoco.mj_forward(m, d)
+        self._stale = False
 
     # -- physics -----------------------------------------------------------------------------------
     def step(self, duration: float | None = None) -> None:
@@ -232,6 +249,11 @@ class SimRobot:
         """World positions of the microphones (n_mics, 3), m, from the model's mic sites."""
         self._sync()
         return self.data.site_xpos[self._mics].copy()
+
+    def motor_positions(self) -> np.ndarray:
+        """World positions of the three gear motors' centres (3, 3), m (ego-noise sources)."""
+        self._sync()
+        return self.data.geom_xpos[self._motors].copy()
 
     def array_pose(self) -> tuple[np.ndarray, np.ndarray]:
         """Array frame in the world: (origin (3,), rotation (3, 3) whose columns are the array axes)."""

@@ -28,6 +28,7 @@ MATERIALS: dict[str, tuple[float, tuple[float, float, float, float]]] = {
     "plasterboard": (0.5, (0.9, 0.9, 0.86, 1)),
     "wood_16mm": (0.6, (0.55, 0.4, 0.25, 1)),
     "hard_surface": (0.7, (0.7, 0.7, 0.7, 1)),
+    "rubble": (0.8, (0.55, 0.5, 0.44, 1)),  # debris-covered floor: friction as concrete
 }
 _DEFAULT_MATERIAL = (0.8, (0.6, 0.6, 0.6, 1))
 
