@@ -1,4 +1,4 @@
-"""Baseline navigation policies on SSLRescue-v0: random vs the paper's loudest-source heuristic.
+"""Baseline navigation policies on SSLRescue-v0: random vs the rescue behaviour's map-planning policy.
 
 Each policy runs the same N seeded episodes (``env.reset(seed=s)`` for s = seed_start ..
 seed_start + N - 1: the same generated scene, voices and noise for both policies); reported per
