@@ -383,43 +383,42 @@ class RescueBehaviour:
             elif crit is None and reached:
                 # At its estimate and no cue says a mouth is here: listen a few times, then it is a reflection
                 # (a mirror image beyond a wall triangulates as tightly as a caller: measured in light rubble).
-                n = self._close_listens[s.id] = self._close_listens.get(s.id, 0) + 1
-                if n < cfg.reject_after_listens:
-                    self._emit(Decision.NO_TARGET, f"at the estimate of source #{s.id} ({d:.2f} m), no found cue "
-                                                   f"yet: listen again ({n}/{cfg.reject_after_listens})",
-                               {"source": s.id})
+                if self._listen_again(s, f"at the estimate of source #{s.id} ({d:.2f} m), no found cue yet"):
                     return True
-                self.map.set_state(s.id, SourceState.REJECTED, self.clock.now())
-                if self.target == s.id:
-                    self.target, self.plan = None, None
-                self._emit(Decision.REJECTED, f"source #{s.id}: at its estimate ({d:.2f} m) for "
-                                              f"{cfg.reject_after_listens} listens without a found cue: a reflection",
-                           {"source": s.id, "position": s.position.tolist()})
+                self._reject(s, f"at its estimate ({d:.2f} m) for {cfg.reject_after_listens} listens without a "
+                                "found cue: a reflection")
                 continue
             if crit is None:
                 continue
             voiced = any(r.voice_probability >= 0.5 for r in s.history)
-            if not voiced and s.cls is not SourceClass.VICTIM:
-                # Close enough to hear a voice if it had one; a caller pauses, so a few listens first: each
-                # listen that hears it without speech lowers P(victim), a pause adds nothing.
-                n = self._close_listens[s.id] = self._close_listens.get(s.id, 0) + 1
-                if n < cfg.reject_after_listens:
-                    self._emit(Decision.NO_TARGET, f"at source #{s.id} ({crit}), no voice yet "
-                                                   f"(P(victim) {s.victim_probability:.2f}): listen again "
-                                                   f"({n}/{cfg.reject_after_listens})", {"source": s.id})
-                    return True
+            # Close enough to hear a voice if it had one; a caller pauses, so a few listens first: each listen
+            # that hears it without speech lowers P(victim), a pause adds nothing.
+            if not voiced and s.cls is not SourceClass.VICTIM and self._listen_again(
+                    s, f"at source #{s.id} ({crit}), no voice yet (P(victim) {s.victim_probability:.2f})"):
+                return True
             if not self._approachable(s):
-                # Still no voice: a machine. Never a target again.
-                self.map.set_state(s.id, SourceState.REJECTED, self.clock.now())
-                if self.target == s.id:
-                    self.target, self.plan = None, None
-                self._emit(Decision.REJECTED, f"source #{s.id} reached ({crit}) but no voice heard "
-                                              f"(P(victim) {s.victim_probability:.2f}): an interferer, not a victim",
-                           {"source": s.id, "position": s.position.tolist()})
+                self._reject(s, f"reached ({crit}) but no voice heard (P(victim) {s.victim_probability:.2f}): "
+                                "an interferer, not a victim")
                 continue
             self._declare_found(s, crit)
             return True
         return False
+
+    def _listen_again(self, s: MapSource, why: str) -> bool:
+        """Count one more listen at ``s``; True (and a NO_TARGET event) while fewer than ``reject_after_listens``."""
+        n = self._close_listens[s.id] = self._close_listens.get(s.id, 0) + 1
+        if n < self.config.reject_after_listens:
+            self._emit(Decision.NO_TARGET, f"{why}: listen again ({n}/{self.config.reject_after_listens})",
+                       {"source": s.id})
+            return True
+        return False
+
+    def _reject(self, s: MapSource, why: str) -> None:
+        """Never a target again (a machine, a reflection)."""
+        self.map.set_state(s.id, SourceState.REJECTED, self.clock.now())
+        if self.target == s.id:
+            self.target, self.plan = None, None
+        self._emit(Decision.REJECTED, f"source #{s.id}: {why}", {"source": s.id, "position": s.position.tolist()})
 
     def _near_found(self, s: MapSource) -> bool:
         """Within ``found_exclusion_m`` of a victim already found: another bearing of it (a reflection, a
