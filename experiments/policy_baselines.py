@@ -1,4 +1,4 @@
-"""Baseline navigation policies on SSLRescue-v0: random vs the paper's loudest-source heuristic.
+"""Baseline navigation policies on SSLRescue-v0: random vs the rescue behaviour's map-planning policy.
 
 Each policy runs the same N seeded episodes (``env.reset(seed=s)`` for s = seed_start ..
 seed_start + N - 1: the same generated scene, voices and noise for both policies); reported per
@@ -26,7 +26,7 @@ import gymnasium as gym
 
 from ssl_sim.envs import EnvConfig
 from ssl_sim.envs.evaluation import evaluate, markdown_table, summarize, write_csv
-from ssl_sim.envs.policies import LoudestSourcePolicy, RandomPolicy
+from ssl_sim.envs.policies import MapPlanningPolicy, RandomPolicy
 
 OUT = Path(__file__).resolve().parent / "results"
 
@@ -49,7 +49,7 @@ def main(argv: list[str] | None = None) -> dict:
     t0 = time.perf_counter()
     results = evaluate(lambda: gym.make("ssl_sim.envs:SSLRescue-v0", config=cfg, max_episode_steps=args.max_steps),
                        {"random": lambda env: RandomPolicy(env.action_space),
-                        "loudest_source_heuristic": lambda env: LoudestSourcePolicy(cfg)}, seeds)
+                        "map_planning_policy": lambda env: MapPlanningPolicy(cfg)}, seeds)
     wall = time.perf_counter() - t0
     summaries = summarize(results)
     table = markdown_table(summaries)

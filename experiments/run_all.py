@@ -74,7 +74,7 @@ def summary_table(outcomes: dict[str, Outcome]) -> str:
 
 #: Experiments run on their own (not by run_all): results file -> what it is.
 OTHERS = {
-    "policy_baselines.md": "policy baselines on SSLRescue-v0 (random vs loudest-source heuristic: success, SPL, "
+    "policy_baselines.md": "policy baselines on SSLRescue-v0 (random vs map-planning policy: success, SPL, "
                            "path length, collisions; `python -m experiments.policy_baselines`)",
     "listen_while_driving.md": "what listening while driving costs in accuracy, with and without the motors' "
                                "ego-noise (`python -m experiments.listen_while_driving`)",

@@ -139,8 +139,8 @@ def recording(tmp_path_factory):
     (["--set", "listen_s=abc"], "--set listen_s: expected a number"),
     (["--set", "listen_s=nan"], "--set listen_s: expected a finite number"),
     (["--set", "listen_s=-1"], "listen_s"),
-    (["--set", "max_recoveries=2.5"], "--set max_recoveries: expected an integer"),
-    (["--set", "turn_first=maybe"], "--set turn_first: expected true/false"),
+    (["--set", "reject_after_listens=2.5"], "--set reject_after_listens: expected an integer"),
+    (["--set", "require_voice=maybe"], "--set require_voice: expected true/false"),
     (["--set", "colour=red"], "--set: unknown key(s) ['colour']"),
     (["--set", "listen_s"], "--set 'listen_s': expected FIELD=VALUE"),
 ])

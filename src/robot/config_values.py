@@ -79,3 +79,9 @@ def field_values(cls, values: dict[str, Any], what: str, text: bool = False, sep
         raise ValueError(f"{what}: unknown key(s) {unknown}; expected some of {sorted(known)}")
     hints = typing.get_type_hints(cls)
     return {k: coerce(v, hints[k], f"{what}{sep}{k}", text) for k, v in values.items()}
+
+
+def need(config: Any, ok: bool, name: str, expected: str) -> None:
+    """A config check: unless ``ok``, a ``ValueError`` naming the class, the field, its value and ``expected``."""
+    if not ok:
+        raise ValueError(f"{type(config).__name__}.{name}={getattr(config, name)!r}: expected {expected}")

@@ -40,7 +40,7 @@ from scipy.sparse.csgraph import dijkstra
 
 from robot.odometry import wrap_angle
 from robot.monitored_audio import MonitoredAudio
-from robot.rescue import RescueBehaviour, RescueEvent
+from robot.rescue import Decision, RescueBehaviour, RescueEvent
 from ssl_core.geometry import cube8
 from ssl_core.health import HealthConfig, MicHealth
 from ssl_core.localizer import Localizer
@@ -192,7 +192,7 @@ class RescueRun:
         self.mic_health = MonitoredAudio(self.audio, MicHealth(cube8(), HealthConfig(fs=sc.localizer.fs)),
                                          localizer, on_change=self._on_mic_faults)
         self.behaviour = RescueBehaviour(self.mic_health, self.drive, self.clock, self.localizer, sc.behaviour,
-                                         params=robot.params, start_pose=world.robot_start)
+                                         params=robot.params, start_pose=world.robot_start, **sc.stage_configs())
         self.paths = FreeSpacePaths(world)
         # truth bookkeeping
         self._obstacle_blocks = [not b.climbable for b in world.obstacles]
@@ -313,13 +313,14 @@ class RescueRun:
         for ev in events:
             self.events.append(ev)
             if self.logger.enabled:
-                level = "WARN" if ev.decision in ("recover", "stuck", "drive_fault", "error") else "INFO"
+                level = "WARN" if ev.decision in (Decision.RECOVER, Decision.STUCK, Decision.DRIVE_FAULT,
+                                                  Decision.ERROR) else "INFO"
                 self.logger.event(ev.time, ev.state.value, str(ev), level)
-                if ev.decision == "target" and self.audio.last_array_poses:
+                if ev.decision is Decision.TARGET and self.audio.last_array_poses:
                     # Decided right after the listen: the array pose at the end of that block.
                     origin, rot = self.audio.last_array_poses[-1]
                     self.logger.target(ev.time, origin, rot @ _unit(ev.data["azimuth"], ev.data["elevation"]))
-            if ev.decision != "victim_found":
+            if ev.decision is not Decision.VICTIM_FOUND:
                 continue
             _, x, y, _, yaw = self._pose_at(ev.time)
             est = ev.data.get("position", (math.nan, math.nan))
@@ -335,14 +336,24 @@ class RescueRun:
                 self.found[i] = entry
                 if self.logger.enabled:
                     order = sorted(self.found)
-                    self.logger.found(ev.time, np.array([self.sources[k].position for k in order]),
-                                      [self.sources[k].name for k in order])
+                    h = [ev.data.get("height", 0.1)] * len(order)
+                    est = np.array([[*self.found[k]["estimate"], hk] for k, hk in zip(order, h)], float)
+                    self.logger.found(ev.time, est, np.array([self.sources[k].position for k in order]),
+                                      [f"{self.sources[k].name} (off {self.found[k]['estimate_error_m']:.2f} m)"
+                                       for k in order])
             else:
                 i = int(np.argmin(dists)) if dists else None
                 entry.update({"nearest_victim": self.sources[i].name if i is not None else None,
                               "nearest_distance_m": _r(dists[i]) if i is not None else None,
                               "late": ev.time > sc.time_limit_s})
                 self.false_positives.append(entry)
+
+    def _log_map(self) -> None:
+        """The behaviour's own picture: sound map, plan, learned obstacles (odometry frame = world frame here)."""
+        b, t = self.behaviour, self.robot.time
+        self.logger.sound_map(t, b.map.sources)
+        self.logger.plan(t, b.pose[:2], None if b.plan is None else b.plan.waypoints)
+        self.logger.obstacles(t, b.grid.obstacle_points(), b.grid.resolution)
 
     # -- main loop ------------------------------------------------------------------------
     def run(self, progress: bool = False, close_logger: bool = True) -> dict[str, Any]:
@@ -371,6 +382,8 @@ class RescueRun:
                 if self.clock.now() >= sc.time_limit_s:
                     break
                 self._handle_events(self.behaviour.step())
+                if self.logger.enabled:
+                    self._log_map()
                 if bar is not None:
                     bar.n = min(self.clock.now(), sc.time_limit_s)
                     bar.set_postfix_str(f"found {len(self.found)}/{self.n_victims}")
@@ -427,7 +440,7 @@ class RescueRun:
         acou = self.audio.timing["acoustics"]
         loc = self.localizer.seconds
         sim_t = self.robot.time
-        bumps = sum(1 for e in self.events if e.decision == "recover" and e.data.get("bumper"))
+        bumps = sum(1 for e in self.events if e.decision is Decision.RECOVER and e.data.get("bumper"))
         return {
             "scenario": sc.name, "scenario_file": sc.path, "seed": self.seed, "scene": self.world.name,
             "description": sc.description,
@@ -445,6 +458,7 @@ class RescueRun:
             "microphone_faults": [{"time_s": _r(t, 2), "state": state, "kind": f.kind, "channels": list(f.channels),
                                    "detail": f.detail} for t, state, f in self.mic_health.history],
             "config": {"behaviour": asdict(sc.behaviour), "localizer": asdict(sc.localizer),
+                       **{k: asdict(v) for k, v in sc.stage_configs().items()},
                        "acoustics": dict(sc.acoustics),
                        "noise": asdict(sc.noise) if sc.noise is not None else None},
             "wall_clock_s": {"setup": _r(self.setup_s, 3), "loop": _r(loop_s, 3), "physics": _r(phys, 3),

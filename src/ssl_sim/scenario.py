@@ -39,7 +39,11 @@ of the robot start in radians. Example (``scenarios/paper_lab.toml``)::
 
     [acoustics]              # AcousticConfig fields: rt60_s, ism_order, max_rir_s, late_reverb, ...
     [localizer]              # ssl_core LocalizerConfig fields
-    [behaviour]              # robot.rescue RescueConfig fields
+    [behaviour]              # robot.rescue RescueConfig fields (decisions)
+    [motion]                 # robot.motion MotionConfig fields
+    [sound_map]              # robot.sound_map SoundMapConfig fields (array_height_m comes from [behaviour])
+    [planner]                # robot.planner PlannerConfig fields
+    [occupancy]              # robot.occupancy OccupancyConfig fields
 
 Every error names the file and the field (``paper_lab.toml: victims[0].position: ...``).
 """
@@ -54,7 +58,11 @@ from typing import Any
 import numpy as np
 
 from robot.config_values import check_scalar, field_values
+from robot.motion import MotionConfig
+from robot.occupancy import OccupancyConfig
+from robot.planner import PlannerConfig
 from robot.rescue import RescueConfig
+from robot.sound_map import SoundMapConfig
 from ssl_core.gcc_phat import band_bins
 from ssl_core.localizer import LocalizerConfig
 from ssl_sim.acoustics import AcousticConfig, AmbientNoise, SoundSource, noise_source
@@ -145,7 +153,16 @@ class Scenario:
     acoustics: dict[str, Any] = field(default_factory=dict)
     localizer: LocalizerConfig = field(default_factory=LocalizerConfig)
     behaviour: RescueConfig = field(default_factory=RescueConfig)
+    motion: MotionConfig = field(default_factory=MotionConfig)
+    sound_map: SoundMapConfig = field(default_factory=SoundMapConfig)
+    planner: PlannerConfig = field(default_factory=PlannerConfig)
+    occupancy: OccupancyConfig = field(default_factory=OccupancyConfig)
     path: str = ""
+
+    def stage_configs(self) -> dict[str, Any]:
+        """The behaviour's per-stage configs as ``RescueBehaviour`` keyword arguments."""
+        return {"motion": self.motion, "sound_map": self.sound_map, "planner": self.planner,
+                "occupancy": self.occupancy}
 
     # -- building the run's objects ---------------------------------------------------------
     def with_overrides(self, seed: int | None = None, time_limit_s: float | None = None) -> "Scenario":
@@ -325,7 +342,8 @@ def _resample(x: np.ndarray, fs_in: int, fs_out: int) -> np.ndarray:
 
 # ----------------------------------------------------------------------------- parsing
 _TOP_KEYS = {"name", "description", "seed", "time_limit_s", "success_radius_m", "scene", "robot", "victims",
-             "interferers", "noise", "acoustics", "localizer", "behaviour"}
+             "interferers", "noise", "acoustics", "localizer", "behaviour", "motion", "sound_map", "planner",
+             "occupancy"}
 
 
 def scenario_names() -> list[str]:
@@ -418,10 +436,13 @@ def parse_scenario(data: dict, base_dir: str | Path = ".", path: str = "") -> Sc
     behaviour = _dataclass(RescueConfig, beh, "behaviour", where)
     if behaviour.listen_s * localizer.fs < localizer.frame_size:
         raise err(f"behaviour.listen_s: {behaviour.listen_s} s is shorter than one localizer frame")
+    stages = {key: _dataclass(cls, _table(data, key, where), key, where)
+              for key, cls in (("motion", MotionConfig), ("sound_map", SoundMapConfig), ("planner", PlannerConfig),
+                               ("occupancy", OccupancyConfig))}
     return Scenario(name=name, scene=scene, victims=victims, interferers=interferers,
                     description=_get(data, "description", str, where, default=""), seed=seed,
                     time_limit_s=time_limit, success_radius_m=radius, robot_start=start, noise=noise,
-                    acoustics=acoustics, localizer=localizer, behaviour=behaviour, path=str(path))
+                    acoustics=acoustics, localizer=localizer, behaviour=behaviour, path=str(path), **stages)
 
 
 def _check_localizer(cfg: LocalizerConfig, audio_fs: int, where: str) -> None:

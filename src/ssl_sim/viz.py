@@ -79,8 +79,17 @@ class RunLogger:
     def target(self, t: float, origin_world: np.ndarray, direction_world: np.ndarray | None) -> None:
         """Where the behaviour heads (world direction from ``origin_world``), or None for no target."""
 
-    def found(self, t: float, positions_world: np.ndarray, labels: Sequence[str]) -> None:
-        """True positions of the victims found so far."""
+    def found(self, t: float, estimated_world: np.ndarray, truth_world: np.ndarray, labels: Sequence[str]) -> None:
+        """Victims found so far: where the robot reported them (its map estimate) and where they are, (k, 3) each."""
+
+    def sound_map(self, t: float, sources: Sequence) -> None:
+        """The robot's sound map (``robot.sound_map.MapSource`` list, world frame)."""
+
+    def plan(self, t: float, start_world: np.ndarray, waypoints_world: np.ndarray | None) -> None:
+        """The planned path (k, 2) from ``start_world`` (x, y), or None."""
+
+    def obstacles(self, t: float, cells_world: np.ndarray, cell_size: float) -> None:
+        """Obstacles learned by touch: centres (k, 2) of occupied grid cells of ``cell_size`` m."""
 
     def scalars(self, t: float, values: dict[str, float]) -> None:
         """Time series, e.g. ``{"angular_error_deg": 2.1}``."""
@@ -144,6 +153,8 @@ _H2_EMPTY_SETTINGS = bytes([0, 0, 0, 0x04, 0, 0, 0, 0, 0])  # length 0, type SET
 _VICTIM_RGB = (230, 40, 40)
 _FOUND_RGB = (40, 200, 60)
 _OTHER_RGB = (255, 150, 0)
+#: Sound-map classes (the truth markers above use red / orange; the map's estimates lighter tones).
+_CLASS_RGB = {"victim": (60, 220, 220), "interferer": (255, 200, 60), "unknown": (170, 170, 170)}
 
 
 def _colormap(values: np.ndarray) -> np.ndarray:
@@ -286,10 +297,54 @@ class RerunLogger(RunLogger):
                                                          vectors=[0.8 * np.asarray(direction_world, float)],
                                                          colors=[(255, 0, 255)], radii=0.012, labels=["target"]))
 
-    def found(self, t, positions_world, labels) -> None:
+    def found(self, t, estimated_world, truth_world, labels) -> None:
         self._time(t)
-        self.rec.log("world/found", self.rr.Points3D(np.asarray(positions_world, float).reshape(-1, 3), radii=0.1,
-                                                    colors=[_FOUND_RGB], labels=list(labels)))
+        est = np.asarray(estimated_world, float).reshape(-1, 3)
+        tru = np.asarray(truth_world, float).reshape(-1, 3)
+        self.rec.log("world/found", self.rr.Points3D(est, radii=0.1, colors=[_FOUND_RGB], labels=list(labels)))
+        # the estimate's error as a line from the report to the truth
+        self.rec.log("world/found_error", self.rr.LineStrips3D([[a, b] for a, b in zip(est, tru)],
+                                                               colors=[(200, 0, 0)], radii=0.01))
+
+    def sound_map(self, t, sources) -> None:
+        self._time(t)
+        if not sources:
+            self.rec.log("world/sound_map", self.rr.Clear(recursive=False))
+            return
+        centers, halves, quats, colors, labels = [], [], [], [], []
+        for s in sources:
+            # 2-sigma ellipse of the horizontal covariance (a flat ellipsoid; z half-size from its variance)
+            w, v = np.linalg.eigh(np.asarray(s.covariance, float)[:2, :2])
+            w = np.sqrt(np.maximum(w, 1e-6))
+            a = math.atan2(v[1, 1], v[0, 1])       # the long axis
+            centers.append(np.asarray(s.position, float))
+            halves.append([min(2 * w[1], 5.0), min(2 * w[0], 5.0), min(2 * math.sqrt(max(s.covariance[2][2], 1e-6)), 1.0)])
+            quats.append(self.rr.Quaternion(xyzw=[0.0, 0.0, math.sin(a / 2), math.cos(a / 2)]))
+            rgb = _CLASS_RGB.get(s.cls.value, (150, 150, 150))
+            colors.append(tuple(int(c * 0.5) for c in rgb) if s.state.value in ("found", "rejected") else rgb)
+            labels.append(f"#{s.id} {s.cls.value} P={s.victim_probability:.2f} {s.state.value}")
+        self.rec.log("world/sound_map", self.rr.Ellipsoids3D(centers=centers, half_sizes=halves, quaternions=quats,
+                                                             colors=colors, labels=labels,
+                                                             fill_mode=self.rr.components.FillMode.MajorWireframe))
+
+    def plan(self, t, start_world, waypoints_world) -> None:
+        self._time(t)
+        if waypoints_world is None or not len(waypoints_world):
+            self.rec.log("world/plan", self.rr.Clear(recursive=False))
+            return
+        pts = np.vstack([np.asarray(start_world, float)[:2], np.asarray(waypoints_world, float).reshape(-1, 2)])
+        pts = np.column_stack([pts, np.full(len(pts), 0.02)])
+        self.rec.log("world/plan", self.rr.LineStrips3D([pts], colors=[(255, 0, 255)], radii=0.015))
+
+    def obstacles(self, t, cells_world, cell_size) -> None:
+        self._time(t)
+        c = np.asarray(cells_world, float).reshape(-1, 2)
+        if not len(c):
+            return
+        self.rec.log("world/learned_obstacles",
+                     self.rr.Boxes3D(centers=np.column_stack([c, np.full(len(c), 0.1)]),
+                                     half_sizes=[[cell_size / 2, cell_size / 2, 0.1]] * len(c),
+                                     colors=[(230, 120, 40, 160)], fill_mode=self.rr.components.FillMode.Solid))
 
     def scalars(self, t, values: dict[str, float]) -> None:
         self._time(t)

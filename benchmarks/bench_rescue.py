@@ -1,0 +1,196 @@
+"""Rescue sweep: the map-planning behaviour beside the old reactive one, measured in the same run.
+
+For each code version (this tree's ``src`` and the ``--baseline`` git ref's ``src``, extracted with
+``git archive`` into a temporary directory) a worker process runs every scenario x seed as ``ssl-rescue sweep``
+does (``ssl_sim.runner.RescueRun``, one process per run, deterministic per seed) and returns one row per run.
+Scenario files are always this tree's (the old code runs the same scenarios; sections it does not know are
+removed from a temporary copy). Prints, per scenario and version: victims found, runs with all found, mean
+SPL, false "found" per run, runs ending "stuck", position error of found victims (median / p90 over victims),
+mean simulated time; then one JSON line.
+
+Targets (issue 13): paper_lab 8/8; light_rubble_three >= 23/24 victims with a 180 s limit, mean SPL >= 0.6;
+dense_pump >= 12/16; the machine-louder scenario >= 4/5 seeds; false found <= 0.1 per run; no "stuck" while
+back-offs succeed; position error median <= 0.3 m, p90 <= 0.5 m.
+
+Run (background it, it takes long on a shared machine):
+``nice .venv/bin/python benchmarks/bench_rescue.py --seeds 0:8 [--baseline main] [--workers 2]``
+"""
+from __future__ import annotations
+
+import os
+
+for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
+    os.environ.setdefault(_v, "1")
+
+import argparse  # noqa: E402
+import concurrent.futures as cf  # noqa: E402
+import json  # noqa: E402
+import multiprocessing  # noqa: E402
+import subprocess  # noqa: E402
+import sys  # noqa: E402
+import tempfile  # noqa: E402
+import time  # noqa: E402
+import tomllib  # noqa: E402
+from pathlib import Path  # noqa: E402
+
+import numpy as np  # noqa: E402
+
+ROOT = Path(__file__).resolve().parents[1]
+SCENARIOS = ["paper_lab", "light_rubble_three", "dense_pump", "behind_partition", "half_buried_slab"]
+OPTIONAL = ["generator_louder"]        # the voice issue's machine-louder scenario, when present
+TIME_LIMITS = {"light_rubble_three": 180.0}   # the issue's target is with a 180 s limit
+NEW_SECTIONS = ("motion", "sound_map", "planner", "occupancy")
+
+
+# ----------------------------------------------------------------------------- worker side
+def _one(path: str, seed: int, time_limit: float | None) -> dict:
+    from ssl_sim.runner import RescueRun
+    from ssl_sim.scenario import load_scenario
+    t0 = time.process_time()
+    sc = load_scenario(path).with_overrides(seed=seed, time_limit_s=time_limit)
+    r = RescueRun(sc).run()
+    ev = r["events"]
+    last_backoff_ok = not any("backing off blocked" in e for e in ev[-3:])
+    return {"scenario": r["scenario"], "seed": seed, "n_found": r["n_found"], "n_victims": r["n_victims"],
+            "success": r["success"], "spl": r["spl"], "false_positives": len(r["false_positives"]),
+            "end_reason": r["end_reason"], "stuck_with_free_backoff": r["end_reason"].endswith("stuck")
+            and last_backoff_ok, "sim_time_s": r["sim_time_s"], "cpu_s": round(time.process_time() - t0, 2),
+            "position_errors_m": [v["estimate_error_m"] for v in r["victims"]
+                                  if v["found"] and v.get("estimate_error_m") is not None]}
+
+
+def worker(paths: list[str], seeds: list[int], workers: int, out: str) -> None:
+    tasks = [(p, s, TIME_LIMITS.get(Path(p).stem)) for p in paths for s in seeds]
+    ctx = multiprocessing.get_context("spawn")
+    with cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as ex:
+        rows = list(ex.map(_one, *zip(*tasks)))
+    Path(out).write_text(json.dumps(rows))
+
+
+# ----------------------------------------------------------------------------- driver side
+def _scenario_paths(tmp: Path, old: bool) -> list[str]:
+    names = SCENARIOS + [n for n in OPTIONAL if (ROOT / "scenarios" / f"{n}.toml").exists()]
+    out = []
+    for n in names:
+        src = ROOT / "scenarios" / f"{n}.toml"
+        if not old:
+            out.append(str(src))
+            continue
+        data = tomllib.loads(src.read_text())
+        if not any(k in data for k in NEW_SECTIONS):
+            out.append(str(src))
+            continue
+        # The old code rejects sections it does not know: a copy without them, beside the original (scene paths).
+        lines, skip = [], False
+        for line in src.read_text().splitlines():
+            if line.strip().startswith("["):
+                skip = line.strip().strip("[]") in NEW_SECTIONS
+            if not skip:
+                lines.append(line)
+        dst = src.with_name(f".{n}.baseline.toml")
+        dst.write_text("\n".join(lines) + "\n")
+        out.append(str(dst))
+    return out
+
+
+def _start_version(src: Path, paths: list[str], seeds: list[int], workers: int, tmp: Path, tag: str):
+    """Start one code version's runs in a worker process; returns (process, output file)."""
+    out = tmp / f"{tag}.json"
+    env = dict(os.environ, PYTHONPATH=str(src))
+    cmd = [sys.executable, __file__, "--worker", str(out), "--workers", str(workers),
+           "--seeds", ",".join(map(str, seeds)), "--paths", *paths]
+    return subprocess.Popen(cmd, env=env, cwd=str(ROOT)), out
+
+
+def _finish(proc, out: Path) -> list[dict]:
+    if proc.wait() != 0:
+        raise RuntimeError(f"bench worker failed (exit {proc.returncode})")
+    return json.loads(out.read_text())
+
+
+def _table(rows: list[dict]) -> list[dict]:
+    out = []
+    for name in dict.fromkeys(r["scenario"] for r in rows):
+        rs = [r for r in rows if r["scenario"] == name]
+        errs = np.array([e for r in rs for e in r["position_errors_m"]])
+        out.append({"scenario": name, "runs": len(rs),
+                    "victims_found": f"{sum(r['n_found'] for r in rs)}/{sum(r['n_victims'] for r in rs)}",
+                    "all_found_runs": sum(r["success"] for r in rs),
+                    "mean_spl": round(float(np.mean([r["spl"] for r in rs])), 3),
+                    "false_found_per_run": round(float(np.mean([r["false_positives"] for r in rs])), 3),
+                    "stuck_runs": sum(r["end_reason"].endswith("stuck") for r in rs),
+                    "stuck_with_free_backoff": sum(r["stuck_with_free_backoff"] for r in rs),
+                    "pos_err_median_m": round(float(np.median(errs)), 3) if errs.size else None,
+                    "pos_err_p90_m": round(float(np.percentile(errs, 90)), 3) if errs.size else None,
+                    "mean_sim_time_s": round(float(np.mean([r["sim_time_s"] for r in rs])), 1),
+                    "cpu_s_per_run": round(float(np.mean([r["cpu_s"] for r in rs])), 1)})
+    return out
+
+
+def _markdown(rows: list[dict]) -> str:
+    cols = list(rows[0])
+    lines = ["| " + " | ".join(cols) + " |", "|" + "|".join("---" for _ in cols) + "|"]
+    lines += ["| " + " | ".join("-" if r[c] is None else str(r[c]) for c in cols) + " |" for r in rows]
+    return "\n".join(lines)
+
+
+def main(argv: list[str] | None = None) -> int:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    ap.add_argument("--seeds", default="0:8", help="START:STOP (stop exclusive) or a comma list")
+    ap.add_argument("--baseline", default="main", help="git ref of the old behaviour ('' = skip it)")
+    ap.add_argument("--baseline-src", default=None,
+                    help="or the src directory of a checkout of the old behaviour (with its models/, data/ beside)")
+    ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--rows-out", default=None, help="also write every run's row (JSON) here")
+    ap.add_argument("--rows-in", nargs="*", default=(), help="rows files of earlier runs to add to the tables")
+    ap.add_argument("--worker", default=None, help=argparse.SUPPRESS)
+    ap.add_argument("--paths", nargs="*", default=None, help=argparse.SUPPRESS)
+    args = ap.parse_args(argv)
+    seeds = (list(range(*map(int, args.seeds.split(":")))) if ":" in args.seeds
+             else [int(s) for s in args.seeds.split(",")])
+    if args.worker:
+        worker(args.paths, seeds, args.workers, args.worker)
+        return 0
+    t0 = time.perf_counter()
+    with tempfile.TemporaryDirectory() as d:
+        tmp = Path(d)
+        # Both versions at once (each with ``workers`` processes): the same seeds, the same scenario files.
+        jobs = {"new": _start_version(ROOT / "src", _scenario_paths(tmp, old=False), seeds, args.workers, tmp, "new")}
+        old_paths: list[str] = []
+        if args.baseline or args.baseline_src:
+            if args.baseline_src:
+                base_src = Path(args.baseline_src).resolve()
+            else:
+                base = tmp / "baseline"
+                base.mkdir()
+                # the whole tree: the code finds its scenes and sounds beside src (models/, data/)
+                arch = subprocess.run(["git", "-C", str(ROOT), "archive", args.baseline], check=True,
+                                      capture_output=True).stdout
+                subprocess.run(["tar", "-x", "-C", str(base)], input=arch, check=True)
+                base_src = base / "src"
+            old_paths = _scenario_paths(tmp, old=True)
+            jobs["old"] = _start_version(base_src, old_paths, seeds, args.workers, tmp, "old")
+        try:
+            rows = {tag: _finish(*job) for tag, job in jobs.items()}
+        finally:
+            for p in old_paths:
+                if Path(p).name.startswith("."):
+                    Path(p).unlink(missing_ok=True)
+        for f in args.rows_in:      # e.g. other seeds run earlier: one table over all of them
+            for tag, rs in json.loads(Path(f).read_text()).items():
+                rows.setdefault(tag, []).extend(rs)
+        if args.rows_out:
+            Path(args.rows_out).write_text(json.dumps(rows))
+        seeds = sorted({r["seed"] for r in rows["new"]})
+        new, old = _table(rows["new"]), (_table(rows["old"]) if "old" in rows else None)
+    print(f"seeds {seeds}; light_rubble_three limited to {TIME_LIMITS['light_rubble_three']:g} s\n")
+    print("map-planning behaviour (this tree):\n" + _markdown(new) + "\n")
+    if old:
+        print(f"old reactive behaviour ({args.baseline_src or args.baseline}):\n" + _markdown(old) + "\n")
+    print(json.dumps({"bench": "rescue", "seeds": seeds, "new": new, "old": old,
+                      "wall_s": round(time.perf_counter() - t0, 1)}))
+    return 0
+
+
+if __name__ == "__main__":
+    raise SystemExit(main())

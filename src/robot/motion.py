@@ -1,0 +1,170 @@
+"""Motion primitives with odometry feedback: turn in place, translate holding the yaw, back off.
+
+Frames: headings are in the ROBOT frame at the start of the move (rad, CCW from forward) unless stated;
+poses in the odometry frame. Every primitive stops the drive when it ends; a bumper press, a stall (the
+drive's own flag, or too little odometry progress for the command: ``StallWatch``), wheel slip that the
+gyro exposes (``Odometry.slipping`` for ``slip_intervals`` readings in a row) or a fatal fault raise
+``Blocked`` with the drive status, after stopping.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass, fields
+from typing import Callable
+
+from robot.hal import Clock, DriveBase, DriveStatus
+from robot.odometry import Odometry
+
+__all__ = ["MotionConfig", "Blocked", "Motion", "StallWatch"]
+
+
+@dataclass(frozen=True)
+class MotionConfig:
+    """Parameters of the motion primitives (SI units; ``*_deg`` in degrees)."""
+
+    control_dt: float = 0.05               # control loop period while moving (s)
+    turn_speed: float = 1.2                # max turn rate (rad/s)
+    turn_tolerance_deg: float = 6.0        # no turn for a heading this close to straight ahead
+    drive_speed: float = 0.25              # m/s
+    recover_speed: float = 0.15            # m/s while backing off
+    backoff_m: float = 0.15                # back-off after a contact
+    stall_window_s: float = 0.6            # own stall check: progress over this window ...
+    stall_progress_ratio: float = 0.2      # ... below this fraction of the commanded motion = stalled
+    slip_intervals: int = 4                # gyro-detected slip this many readings in a row (0.2 s) = blocked
+    motion_timeout_factor: float = 3.0     # a move may take this many times its nominal duration
+
+    def __post_init__(self) -> None:
+        for f in fields(self):
+            v = getattr(self, f.name)
+            if not (isinstance(v, (int, float)) and math.isfinite(v) and v > 0):
+                raise ValueError(f"MotionConfig.{f.name}={v!r}: expected a finite number > 0")
+
+
+class Blocked(Exception):
+    """A move ended early: ``kind`` is "bumper", "stall", "slip" or "fault"; ``heading`` the direction of
+    the attempted motion in the odometry frame (rad) for mapping the contact."""
+
+    def __init__(self, kind: str, status: DriveStatus, heading: float = 0.0) -> None:
+        super().__init__(kind)
+        self.kind, self.status, self.heading = kind, status, heading
+
+
+class StallWatch:
+    """Too little progress (odometry) for the commanded motion over ``stall_window_s``."""
+
+    def __init__(self, cfg: MotionConfig, t: float, progress: float) -> None:
+        self.cfg, self.t0, self.p0 = cfg, t, progress
+        self.expected = 0.0
+        self.last_t = t
+
+    def stalled(self, t: float, progress: float, commanded_rate: float) -> bool:
+        self.expected += commanded_rate * (t - self.last_t)
+        self.last_t = t
+        if t - self.t0 >= self.cfg.stall_window_s:
+            made = abs(progress - self.p0)
+            if self.expected > 0 and made < self.cfg.stall_progress_ratio * self.expected:
+                return True
+            self.t0, self.p0, self.expected = t, progress, 0.0
+        return False
+
+
+class Motion:
+    """The primitives on ``drive`` with ``odometry`` fed by the drive's encoders and gyro.
+
+    ``fatal``: called with each status; returns True when the mission must stop (faults)."""
+
+    def __init__(self, drive: DriveBase, clock: Clock, odometry: Odometry, config: MotionConfig = MotionConfig(),
+                 fatal: Callable[[DriveStatus], bool] = lambda s: False) -> None:
+        self.drive, self.clock, self.odometry, self.config, self.fatal = drive, clock, odometry, config, fatal
+        self._slips = 0
+
+    def update_odometry(self):
+        return self.odometry.update(self.drive.odometry(), self.drive.status().yaw_rate)
+
+    def _check(self, bumper_armed: bool, heading_world: float) -> None:
+        st = self.drive.status()
+        kind = None
+        if self.fatal(st):
+            kind = "fault"
+        elif st.bumper and bumper_armed:
+            kind = "bumper"
+        elif st.stalled:
+            kind = "stall"
+        elif self._slips >= self.config.slip_intervals:
+            kind = "slip"
+        if kind is not None:
+            self.drive.stop()
+            self.update_odometry()
+            raise Blocked(kind, st, heading_world)
+
+    def _tick_odometry(self):
+        pose = self.update_odometry()
+        self._slips = self._slips + 1 if self.odometry.slipping else 0
+        return pose
+
+    def turn(self, angle: float) -> None:
+        """Turn in place by ``angle`` rad (CCW positive)."""
+        cfg = self.config
+        yaw0 = float(self._tick_odometry()[2])
+        t_end = self.clock.now() + cfg.motion_timeout_factor * (abs(angle) / cfg.turn_speed + 0.5)
+        watch = StallWatch(cfg, self.clock.now(), yaw0)
+        self._slips = 0
+        try:
+            while True:
+                yaw = float(self._tick_odometry()[2])
+                remaining = angle - (yaw - yaw0)
+                if abs(remaining) <= math.radians(1.0) or self.clock.now() >= t_end:
+                    break
+                omega = math.copysign(min(cfg.turn_speed, max(0.25, 2.5 * abs(remaining))), remaining)
+                self.drive.set_twist(0.0, 0.0, omega)
+                self.clock.sleep(cfg.control_dt)
+                self._check(True, yaw)
+                if watch.stalled(self.clock.now(), float(self._tick_odometry()[2]), abs(omega)):
+                    self.drive.stop()
+                    raise Blocked("stall", DriveStatus(stalled=True), yaw)
+        finally:
+            self.drive.stop()
+        self.update_odometry()
+
+    def translate(self, heading: float, distance: float, speed: float | None = None,
+                  arm_bumper_on_release: bool = False) -> float:
+        """Move ``distance`` m along ``heading`` (rad, robot frame at the start) keeping the yaw; returns the
+        distance made (odometry). ``arm_bumper_on_release``: a bumper pressed at the start only counts once
+        released (backing away from a contact)."""
+        cfg = self.config
+        speed = cfg.drive_speed if speed is None else speed
+        x0, y0, yaw0 = self._tick_odometry()
+        world_heading = yaw0 + heading
+        ux, uy = math.cos(world_heading), math.sin(world_heading)
+        t_end = self.clock.now() + cfg.motion_timeout_factor * (distance / speed + 0.5)
+        armed = not arm_bumper_on_release or not self.drive.status().bumper
+        watch = StallWatch(cfg, self.clock.now(), 0.0)
+        self._slips = 0
+        done = 0.0
+        try:
+            while True:
+                x, y, yaw = self._tick_odometry()
+                done = (x - x0) * ux + (y - y0) * uy
+                remaining = distance - done
+                if remaining <= 0.005 or self.clock.now() >= t_end:
+                    break
+                v = min(speed, max(0.05, 2.0 * remaining))
+                rel = heading - (yaw - yaw0)  # hold the start yaw: the direction in the body frame turns back
+                self.drive.set_twist(v * math.cos(rel), v * math.sin(rel), -2.0 * (yaw - yaw0))
+                self.clock.sleep(cfg.control_dt)
+                armed = armed or not self.drive.status().bumper
+                self._check(armed, world_heading)
+                x, y, _ = self._tick_odometry()
+                if watch.stalled(self.clock.now(), (x - x0) * ux + (y - y0) * uy, v):
+                    self.drive.stop()
+                    raise Blocked("stall", DriveStatus(stalled=True), world_heading)
+        finally:
+            self.drive.stop()
+        self.update_odometry()
+        return done
+
+    def back_off(self, heading_world: float) -> None:
+        """Back ``backoff_m`` away from a contact met while moving along ``heading_world`` (rad, odometry frame)."""
+        yaw = float(self.odometry.pose[2])
+        self.translate(heading_world + math.pi - yaw, self.config.backoff_m, self.config.recover_speed,
+                       arm_bumper_on_release=True)

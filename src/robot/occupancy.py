@@ -1,0 +1,140 @@
+"""Occupancy grid learned by touch: bump contacts, stalls and wheel slip mark obstacles, driving marks free floor.
+
+Frame: the odometry/world frame (x, y in m). The grid is ``size_m`` square, centred on ``origin`` (the start
+pose by default), at ``resolution_m``; cells hold log-odds of "an obstacle (for the robot's body) is here",
+0 = unknown. A robot without range sensors learns obstacles only where it touches them, so:
+
+* a **contact** (bumper, stall, slip) at the robot's pose while moving along ``heading`` marks a short
+  obstacle face: the cells ``contact_width_m`` wide across the heading, just beyond the bumper
+  (``robot_radius_m``) -- the bumper is a ring, so the contact is somewhere on its front arc;
+* the robot's **footprint** along its path is free (log-odds lowered; the footprint is where it was, so
+  nothing blocking is there at the robot's height);
+* ``visited`` counts footprint coverage (for exploration).
+
+``blocked`` is the configuration space for the robot centre: occupied cells grown by ``robot_radius_m``.
+"""
+from __future__ import annotations
+
+import math
+from dataclasses import dataclass
+
+import numpy as np
+from scipy import ndimage
+
+from robot.config_values import need
+
+__all__ = ["OccupancyConfig", "OccupancyGrid"]
+
+
+@dataclass(frozen=True)
+class OccupancyConfig:
+    resolution_m: float = 0.1        # cell size (the bumper ring is 0.32 m across: 3 cells)
+    size_m: float = 20.0             # grid side (shipped rooms are <= 7 m; the start may be in a corner)
+    robot_radius_m: float = 0.16     # bumper radius (ssl_sim robot model; the real chassis matches)
+    contact_width_m: float = 0.3     # width of the obstacle face marked by one contact (~ the bumper's front arc)
+    hit_log_odds: float = 2.0        # per contact (one contact makes a cell occupied: p = 0.88)
+    free_log_odds: float = -0.4      # per footprint pass (five passes outweigh one contact)
+    occupied_log_odds: float = 1.0   # a cell at or above this is an obstacle
+    max_log_odds: float = 6.0
+
+    def __post_init__(self) -> None:
+        need(self, self.resolution_m > 0, "resolution_m", "> 0 m")
+        need(self, self.size_m >= 10 * self.resolution_m, "size_m", f">= 10 cells ({10 * self.resolution_m} m)")
+        need(self, self.robot_radius_m > 0, "robot_radius_m", "> 0 m")
+        need(self, self.contact_width_m > 0, "contact_width_m", "> 0 m")
+        need(self, self.hit_log_odds > 0, "hit_log_odds", "> 0")
+        need(self, self.free_log_odds < 0, "free_log_odds", "< 0")
+        need(self, 0 < self.occupied_log_odds <= self.max_log_odds, "occupied_log_odds", "in (0, max_log_odds]")
+
+
+class OccupancyGrid:
+    """See the module docstring. ``origin``: (x, y) of the grid centre in the world frame (m)."""
+
+    def __init__(self, config: OccupancyConfig = OccupancyConfig(), origin=(0.0, 0.0)) -> None:
+        self.config = config
+        self.n = int(math.ceil(config.size_m / config.resolution_m))
+        self.origin = np.asarray(origin, float)[:2] - 0.5 * self.n * config.resolution_m  # corner of cell (0, 0)
+        self.log_odds = np.zeros((self.n, self.n))
+        self.visited = np.zeros((self.n, self.n), dtype=np.int32)
+        self.contacts: list[tuple[float, float, str]] = []   # (x, y, why): where contacts were marked
+        self._blocked: np.ndarray | None = None
+
+    # -- coordinates ----------------------------------------------------------------------
+    @property
+    def resolution(self) -> float:
+        return self.config.resolution_m
+
+    def cell(self, xy) -> tuple[int, int]:
+        """Cell index of a world point (may be outside the grid)."""
+        ij = np.floor((np.asarray(xy, float)[:2] - self.origin) / self.resolution).astype(int)
+        return int(ij[0]), int(ij[1])
+
+    def centre(self, ij) -> np.ndarray:
+        return self.origin + (np.asarray(ij, float) + 0.5) * self.resolution
+
+    def inside(self, ij) -> bool:
+        return 0 <= ij[0] < self.n and 0 <= ij[1] < self.n
+
+    def _disc(self, xy, radius: float) -> tuple[np.ndarray, np.ndarray]:
+        r = int(math.ceil(radius / self.resolution)) + 1
+        ci, cj = self.cell(xy)
+        ii, jj = np.meshgrid(np.arange(ci - r, ci + r + 1), np.arange(cj - r, cj + r + 1), indexing="ij")
+        c = self.origin + (np.stack([ii, jj], -1) + 0.5) * self.resolution
+        ok = np.hypot(c[..., 0] - xy[0], c[..., 1] - xy[1]) <= radius
+        ok &= (ii >= 0) & (ii < self.n) & (jj >= 0) & (jj < self.n)
+        return ii[ok], jj[ok]
+
+    # -- learning -------------------------------------------------------------------------
+    def mark_free(self, xy) -> None:
+        """The robot stood here: its footprint is free floor (and visited)."""
+        cfg = self.config
+        ii, jj = self._disc(xy, cfg.robot_radius_m * 0.75)
+        self.log_odds[ii, jj] = np.maximum(self.log_odds[ii, jj] + cfg.free_log_odds, -cfg.max_log_odds)
+        self.visited[ii, jj] += 1
+        self._blocked = None
+
+    def mark_path(self, a, b) -> None:
+        """Footprints every half cell along the straight drive from ``a`` to ``b`` (world m)."""
+        a, b = np.asarray(a, float)[:2], np.asarray(b, float)[:2]
+        n = max(1, int(math.ceil(np.linalg.norm(b - a) / (0.5 * self.resolution))))
+        for t in np.linspace(0.0, 1.0, n + 1):
+            self.mark_free(a + t * (b - a))
+
+    def mark_contact(self, pose, heading: float, why: str = "bump") -> np.ndarray:
+        """A contact while moving along ``heading`` (rad, world frame) at ``pose`` (x, y[, yaw]):
+        marks the obstacle face ahead; returns its centre (world m)."""
+        cfg = self.config
+        x, y = float(pose[0]), float(pose[1])
+        u = np.array([math.cos(heading), math.sin(heading)])
+        n = np.array([-u[1], u[0]])
+        centre = np.array([x, y]) + u * (cfg.robot_radius_m + 0.5 * self.resolution)
+        k = max(1, int(math.ceil(cfg.contact_width_m / (0.5 * self.resolution))))
+        cells = {self.cell(centre + s * n) for s in np.linspace(-0.5, 0.5, k + 1) * cfg.contact_width_m}
+        for ij in cells:
+            if self.inside(ij):
+                self.log_odds[ij] = min(self.log_odds[ij] + cfg.hit_log_odds, cfg.max_log_odds)
+        self.contacts.append((float(centre[0]), float(centre[1]), why))
+        self._blocked = None
+        return centre
+
+    # -- reading --------------------------------------------------------------------------
+    @property
+    def occupied(self) -> np.ndarray:
+        return self.log_odds >= self.config.occupied_log_odds
+
+    @property
+    def blocked(self) -> np.ndarray:
+        """Cells where the robot centre cannot be: occupied cells grown by the robot radius."""
+        if self._blocked is None:
+            occ = self.occupied
+            if occ.any():
+                # An obstacle may fill its cell up to the edge: grow by half a cell more than the radius.
+                reach = self.config.robot_radius_m + 0.5 * self.resolution
+                self._blocked = ndimage.distance_transform_edt(~occ) * self.resolution < reach
+            else:
+                self._blocked = np.zeros_like(occ)
+        return self._blocked
+
+    def obstacle_points(self) -> np.ndarray:
+        """World (x, y) of the occupied cells' centres, (k, 2)."""
+        return self.centre(np.argwhere(self.occupied))

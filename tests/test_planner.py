@@ -1,0 +1,96 @@
+"""Occupancy grid learned by touch and the planner on it, checked against the geometry put in."""
+import math
+
+import numpy as np
+import pytest
+
+from robot.occupancy import OccupancyConfig, OccupancyGrid
+from robot.planner import Planner, PlannerConfig
+from robot.sound_map import MapSource, SourceClass, SourceState
+
+
+def _wall_grid():
+    """A wall along x = 2 from y = -1 to y = 1.5, learned from bumps driving +x along it."""
+    g = OccupancyGrid(OccupancyConfig(size_m=8.0), origin=(1.0, 0.0))
+    for y in np.arange(-1.0, 1.51, 0.25):
+        g.mark_contact((2.0 - 0.17, y), 0.0)
+    return g
+
+
+def test_contact_marks_a_face_ahead_and_driving_clears():
+    g = OccupancyGrid()
+    c = g.mark_contact((1.0, 1.0, 0.0), math.pi / 2)
+    assert abs(c[0] - 1.0) < 1e-9 and 1.16 < c[1] < 1.25
+    assert g.occupied[g.cell(c)] and not g.occupied[g.cell((1.0, 1.0))]
+    assert g.blocked[g.cell((1.0, 1.05))]            # the robot centre cannot be within its radius of it
+    for _ in range(6):
+        g.mark_path((1.0, 0.5), (1.0, 1.3))
+    assert not g.occupied[g.cell(c)]                 # driven through it often: it was not an obstacle
+
+
+def test_path_goes_around_a_learned_wall():
+    g = _wall_grid()
+    p = Planner().plan(g, (0.0, 0.0), (4.0, 0.0), stop_radius=0.2)
+    assert p is not None
+    pts = np.vstack([[0.0, 0.0], p.waypoints])
+    # never crosses the wall's span: every segment crossing x = 2 does so at y > 1.5 + radius or y < -1 - radius
+    for a, b in zip(pts[:-1], pts[1:]):
+        if (a[0] - 2) * (b[0] - 2) < 0:
+            y = a[1] + (2 - a[0]) * (b[1] - a[1]) / (b[0] - a[0])
+            assert y > 1.5 + 0.16 or y < -1.0 - 0.16
+    straight = 4.0 - 0.2
+    assert straight < p.length < 2.2 * straight
+    assert np.hypot(*(p.waypoints[-1] - [4.0, 0.0])) <= 0.2 + 0.1
+
+
+def test_unreachable_goal_gives_none():
+    g = OccupancyGrid(OccupancyConfig(size_m=6.0))
+    for a in np.linspace(0, 2 * math.pi, 48, endpoint=False):   # a closed ring of contacts around (2, 0)
+        g.mark_contact((2 + 0.5 * math.cos(a), 0.5 * math.sin(a)), a)
+    assert Planner().plan(g, (0.0, 0.0), (2.0, 0.0), stop_radius=0.1) is None
+
+
+def _src(i, xy, p, cls, state=SourceState.UNVISITED, last=10.0):
+    return MapSource(i, np.array([*xy, 0.1]), np.eye(3) * 0.01, p, cls, state, 5, 5, 0.0, last, -30.0, -30.0, ())
+
+
+def test_target_prefers_victims_interferers_last_never_found_or_rejected():
+    g = OccupancyGrid()
+    pump = _src(0, (0.8, 0.0), 0.05, SourceClass.INTERFERER)
+    far_victim = _src(1, (3.0, 0.0), 0.9, SourceClass.VICTIM)
+    found = _src(2, (1.0, 1.0), 0.95, SourceClass.VICTIM, SourceState.FOUND)
+    unknown = _src(3, (0.5, -0.5), 0.5, SourceClass.UNKNOWN)
+    pl = Planner()
+    s, plan, why = pl.choose_target([pump, far_victim, found, unknown], g, (0.0, 0.0, 0.0), 12.0)
+    assert s.id == 1 and plan is not None          # the far victim, not the near pump or unknown source
+    s, _, _ = pl.choose_target([pump, found, unknown], g, (0.0, 0.0, 0.0), 12.0)
+    assert s.id == 3                                # no victim: the unclassified one, not the pump
+    s, _, why = pl.choose_target([pump, found], g, (0.0, 0.0, 0.0), 12.0)
+    assert s.id == 0 and "check" in why             # only a machine mapped: go and check it
+    rejected = _src(0, (0.8, 0.0), 0.05, SourceClass.INTERFERER, SourceState.REJECTED)
+    s, plan, _ = pl.choose_target([rejected, found], g, (0.0, 0.0, 0.0), 12.0)
+    assert s is None and plan is None
+
+
+def test_current_target_kept_unless_clearly_better():
+    g = OccupancyGrid()
+    a = _src(0, (2.0, 0.0), 0.8, SourceClass.VICTIM)
+    b = _src(1, (0.0, 1.8), 0.8, SourceClass.VICTIM)
+    pl = Planner(PlannerConfig(keep_factor=1.5))
+    assert pl.choose_target([a, b], g, (0, 0, 0), 10.0, current=0)[0].id == 0
+    assert pl.choose_target([a, b], g, (0, 0, 0), 10.0, current=1)[0].id == 1
+
+
+def test_explore_goes_to_unvisited_floor_away_from_found_victims():
+    g = OccupancyGrid()
+    g.mark_path((-3.0, 0.0), (0.0, 0.0))               # came from -x
+    plan, why = Planner().explore_goal(g, (0.0, 0.0, 0.0), avoid=[np.array([0.0, -1.0])])
+    goal = plan.waypoints[-1]
+    assert goal[0] > -0.3 and goal[1] > -0.3           # not back along the path, not toward the found victim
+
+
+def test_config_errors_name_the_field():
+    with pytest.raises(ValueError, match="keep_factor"):
+        PlannerConfig(keep_factor=0.5)
+    with pytest.raises(ValueError, match="resolution_m"):
+        OccupancyConfig(resolution_m=0)

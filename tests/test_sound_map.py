@@ -1,0 +1,113 @@
+"""World-frame sound map: bearings from a drive past static sources, checked against the geometry put in."""
+from dataclasses import dataclass
+
+import numpy as np
+import pytest
+
+from robot.sound_map import SoundMap, SoundMapConfig, SourceClass, SourceState, triangulate
+
+H = SoundMapConfig().array_height_m
+SOURCES = np.array([[1.5, 2.0, 0.10], [3.2, -1.6, 0.15], [4.6, 1.1, 0.60]])  # world frame (m)
+VOICE = [0.9, 0.1, 0.8]   # victim, machine, victim
+
+
+@dataclass(frozen=True)
+class Ev:
+    track_id: int | None
+    direction: np.ndarray
+    time: float
+    voice_probability: float
+    level_db: float = -30.0
+    activity: float = 1.0
+
+
+def _drive_past(rng, outlier_fraction=0.1, noise_deg=3.0, track_ids=True):
+    """Listens every 0.25 m along a drive from (0, 0) to (5.5, 0.5), yaw wobbling: bearings (array frame)
+    to every source with Gaussian noise, ``outlier_fraction`` of them replaced by random directions."""
+    out = []
+    n = 24
+    for k in range(n):
+        x, y = 5.5 * k / (n - 1), 0.5 * k / (n - 1)
+        yaw = 0.3 * np.sin(k)
+        c, s = np.cos(yaw), np.sin(yaw)
+        evs = []
+        for i, p in enumerate(SOURCES):
+            v = p - [x, y, H]
+            v = np.array([c * v[0] + s * v[1], -s * v[0] + c * v[1], v[2]])  # world -> array frame
+            v /= np.linalg.norm(v)
+            if rng.random() < outlier_fraction:   # a reflection: anywhere on the sphere
+                v = rng.normal(size=3)
+            else:
+                v = v + rng.normal(scale=np.radians(noise_deg), size=3)
+            evs.append(Ev(i if track_ids else None, v / np.linalg.norm(v), float(k), VOICE[i]))
+        out.append(((x, y, yaw), float(k), evs))
+    return out
+
+
+def _closest(m, p):
+    return min(m.sources, key=lambda s: np.linalg.norm(s.position - p))
+
+
+@pytest.mark.parametrize("track_ids", [True, False])
+def test_three_sources_within_0p3_m_despite_10pct_outliers(track_ids):
+    rng = np.random.default_rng(4)
+    m = SoundMap()
+    for pose, t, evs in _drive_past(rng, track_ids=track_ids):
+        m.update(evs, pose, t)
+    for p, v in zip(SOURCES, VOICE):
+        s = _closest(m, p)
+        assert np.linalg.norm(s.position - p) <= 0.3, (p, s.position)
+        assert s.n_inliers >= 18
+        assert s.cls is (SourceClass.VICTIM if v > 0.5 else SourceClass.INTERFERER)
+    # the estimate's own uncertainty covers its error (3 sigma)
+    for p in SOURCES:
+        s = _closest(m, p)
+        assert np.linalg.norm(s.position[:2] - p[:2]) <= 3 * s.horizontal_sigma_m + 0.05
+    # outliers do not become confirmed sources
+    assert sum(s.n_listens >= 3 for s in m.sources) == 3
+
+
+def test_single_pose_gives_range_from_elevation_only():
+    """From one spot the range comes from the elevation and the height prior: right within the prior's spread,
+    and the covariance says so (long along the ray)."""
+    m = SoundMap()
+    p = np.array([2.0, 0.0, 0.2])
+    d = p - [0, 0, H]
+    m.update([Ev(0, d / np.linalg.norm(d), 0.0, 0.9)], (0.0, 0.0, 0.0), 0.0)
+    s = m.sources[0]
+    assert abs(np.arctan2(s.position[1], s.position[0])) < 1e-6
+    assert np.linalg.norm(s.position - p) < 0.05
+    w, v = np.linalg.eigh(s.covariance[:2, :2])
+    assert abs(v[0, np.argmax(w)]) > 0.99           # the long axis is along x (the ray)
+    assert np.sqrt(w.max()) > 3 * np.sqrt(w.min())
+
+
+def test_triangulate_two_perpendicular_rays_exact():
+    o = np.array([[0.0, 0.0, H], [2.0, -2.0, H]])
+    p = np.array([2.0, 0.0, H])
+    pos, cov, inl = triangulate(o, (p - o) / np.linalg.norm(p - o, axis=1, keepdims=True))
+    assert np.linalg.norm(pos - p) < 0.05 and inl.all()
+
+
+def test_found_source_is_never_a_new_source():
+    rng = np.random.default_rng(1)
+    m = SoundMap()
+    drive = _drive_past(rng, outlier_fraction=0.0)
+    for pose, t, evs in drive[:12]:
+        m.update(evs, pose, t)
+    first = _closest(m, SOURCES[0])
+    m.set_state(first.id, SourceState.FOUND, 12.0)
+    for pose, t, evs in drive[12:]:
+        m.update(evs, pose, t)
+    near = [s for s in m.sources if np.linalg.norm(s.position[:2] - SOURCES[0, :2]) < 0.8]
+    assert len(near) == 1 and near[0].state is SourceState.FOUND and near[0].id == first.id
+    m.set_state(first.id, SourceState.APPROACHING)          # a found source stays found
+    assert m.source(first.id).state is SourceState.FOUND
+    assert all(s.id != first.id for s in m.unfound_victims())
+
+
+def test_bad_input_names_the_field():
+    with pytest.raises(ValueError, match="bearing_sigma_deg"):
+        SoundMapConfig(bearing_sigma_deg=0)
+    with pytest.raises(ValueError, match="direction"):
+        SoundMap().update([Ev(0, np.zeros(3), 0.0, 0.5)], (0, 0, 0), 0.0)
