@@ -71,7 +71,7 @@ import numpy as np
 from scipy.optimize import linear_sum_assignment
 
 from ssl_core.grid import azimuth_elevation
-from ssl_core.localizer import Detection
+from ssl_core.detection import DegreesMixin, Detection
 
 _FOUR_PI = 4.0 * np.pi
 
@@ -185,7 +185,7 @@ class TrackerConfig:
 
 
 @dataclass(frozen=True)
-class Track:
+class Track(DegreesMixin):
     """One tracked source, in the ARRAY frame at the time of the last update (see module docstring)."""
 
     id: int                        # stable, unique per Tracker, never reused
@@ -207,14 +207,6 @@ class Track:
     def elevation(self) -> float:
         """rad, up from the array's x-y plane."""
         return float(azimuth_elevation(self.direction)[1])
-
-    @property
-    def azimuth_deg(self) -> float:
-        return float(np.rad2deg(self.azimuth))
-
-    @property
-    def elevation_deg(self) -> float:
-        return float(np.rad2deg(self.elevation))
 
 
 @dataclass(frozen=True)
