@@ -89,6 +89,13 @@ class LocalizerConfig:
     # SRP-PHAT; steady sources (a loudspeaker playing noise) are then localizable too.
     noise_suppression: bool = False
     noise_memory_s: float = 1.5           # how far back the noise floor looks
+    # Interference cancellation for the search after the first source (see _Stream.cov): per bin, the
+    # ``interference_rank`` dominant eigenvectors of the array's recent spatial covariance (memory
+    # ``interference_memory_s``) - the loudest steady source's direct path *and* its early reflections -
+    # are projected out of the spectra before PHAT, so a weaker talker beside a loud machine shows in the
+    # rescan. 0 = off (the paper's search: mask the found TDOA, rescan the same map).
+    interference_rank: int = 0
+    interference_memory_s: float = 1.5
     upsample: int = 4                     # GCC interpolation factor
     sound_speed: float = SOUND_SPEED      # m/s
 
@@ -113,6 +120,9 @@ class LocalizerConfig:
         need(self.upsample >= 1, "upsample", "an integer >= 1")
         need(self.sound_speed > 0, "sound_speed", "> 0 m/s")
         need(self.noise_memory_s > 0, "noise_memory_s", "> 0 s")
+        need(isinstance(self.interference_rank, (int, np.integer)) and 0 <= self.interference_rank <= 2,
+             "interference_rank", "an integer 0 (off), 1 or 2 (dominant covariance eigenvectors projected out)")
+        need(self.interference_memory_s > 0, "interference_memory_s", "> 0 s")
         if self.n_sources > 1:
             need(self.min_separation_deg >= 2 * self.coarse_resolution_deg, "min_separation_deg",
                  f">= 2 x coarse_resolution_deg = {2 * self.coarse_resolution_deg:g} degrees: the coarse grid is "
@@ -143,6 +153,10 @@ class _Stream:
     floor: NoiseFloor | None
     start_time: float = 0.0
     frames_done: int = 0
+    # Recursive spatial covariance (bins, channels, channels) of the active frames, for interference
+    # cancellation; None until the first active window (or when interference_rank is 0).
+    cov: np.ndarray | None = None
+    cov_windows: int = 0
 
 
 class Localizer:
@@ -317,7 +331,7 @@ class Localizer:
         with _one_blas_thread():
             spec, ms = self._analyse(x)
             t_end = ((ms.size - 1) * self.config.hop + self.config.frame_size) / self.config.fs
-            return self._window_result(spec, ms, t_end, self._new_stream().floor)
+            return self._window_result(spec, ms, t_end, self._new_stream())
 
     def window_gcc(self, recording, fs: int | None = None) -> np.ndarray:
         """Window-summed GCC (pairs, lags) of a recording; use with :meth:`srp_fine` for full-resolution maps."""
@@ -352,7 +366,7 @@ class Localizer:
         if st.ms.size:
             t_end = st.start_time + ((st.frames_done + st.ms.size - 1) * self.config.hop + self.config.frame_size) \
                 / self.config.fs
-            yield self._window_result(st.spec, st.ms, t_end, st.floor)
+            yield self._window_result(st.spec, st.ms, t_end, st)
 
     def _process(self, x: np.ndarray, st: _Stream) -> list[LocalizationResult]:
         """Append ``x`` to stream ``st``; analyse its complete frames and return the completed windows."""
@@ -369,7 +383,7 @@ class Localizer:
         while st.ms.size >= w:
             st.frames_done += w
             t_end = st.start_time + ((st.frames_done - 1) * cfg.hop + cfg.frame_size) / cfg.fs
-            out.append(self._window_result(st.spec[:, :w], st.ms[:w], t_end, st.floor))
+            out.append(self._window_result(st.spec[:, :w], st.ms[:w], t_end, st))
             st.spec = st.spec[:, w:]
             st.ms = st.ms[w:]
         return out
@@ -401,16 +415,21 @@ class Localizer:
         return np.concatenate([floor.weights(power[k:k + w]) for k in range(0, power.shape[0], w)]) \
             if power.shape[0] else power
 
-    def _window_result(self, spec, ms, t_end: float, floor: NoiseFloor | None) -> LocalizationResult:
+    def _window_result(self, spec, ms, t_end: float, st: _Stream) -> LocalizationResult:
         active = self._active(ms)
-        weights = self._bin_weights(spec, floor)  # the floor learns from quiet windows too
+        weights = self._bin_weights(spec, st.floor)  # the floor learns from quiet windows too
         n_active = int(active.sum())
         if n_active == 0:
             return LocalizationResult(t_end, [], np.zeros(self.coarse_grid.n_points), 0)
         level = float(10 * np.log10(ms[active].mean() / _FULL_SCALE_SINE_MS))
         spec_a = spec[:, active]
-        gcc, w_sum, n_eff = self._gcc(spec_a, None if weights is None else weights[active])
-        srp_map, peaks = self._search(gcc, n_eff)
+        w_a = None if weights is None else weights[active]
+        gcc, w_sum, n_eff = self._gcc(spec_a, w_a)
+        rest = None
+        if self.config.interference_rank and self.config.n_sources > 1:
+            cleaned = self._cancel_interference(spec_a, st)
+            rest = None if cleaned is None else self._gcc(cleaned, w_a)[0]
+        srp_map, peaks = self._search(gcc, n_eff, rest)
         detections = []
         for power, f, z in peaks:
             u = self.fine_grid.directions[f]
@@ -418,12 +437,45 @@ class Localizer:
             detections.append(Detection(float(az), float(el), u.copy(), power, self._beam_level(spec_a, f), z))
         return LocalizationResult(t_end, detections, srp_map, n_active, level, gcc, w_sum, n_eff)
 
-    def _search(self, gcc: np.ndarray, n_eff: float) -> tuple[np.ndarray, list[tuple[float, int, float]]]:
+    def _cancel_interference(self, spec: np.ndarray, st: _Stream) -> np.ndarray | None:
+        """Active-frame spectra (channels, frames, bins) with the dominant subspace of the covariance
+        of the *previous* windows projected out, ``X - U U^H X`` per bin (None while that covariance is
+        younger than one window); then this window enters the covariance.
+
+        Why a covariance and not a steering vector: in a reverberant room a machine's spatial signature
+        per bin is its room transfer function, direct path plus early reflections; its dominant
+        eigenvector holds all of that, which masking the direct path's TDOA misses (measured: the
+        machine's reflections then outnumber a talker's direct path in the rescan). A steady machine
+        dominates a covariance of ~1.5 s, an intermittent talker does not, so projecting out rank 1 keeps her.
+        Sensor and diffuse noise have a real-symmetric covariance, whose eigenvectors (so ``P``) are
+        real: the residual's correlations stay even in the lag and the significance test keeps its meaning."""
+        cfg = self.config
+        x = spec.transpose(2, 0, 1)  # (bins, channels, frames)
+        out = None
+        if st.cov is not None and st.cov_windows >= 2:
+            _, vec = np.linalg.eigh(st.cov)                    # ascending eigenvalues per bin
+            u = vec[..., -cfg.interference_rank:]               # (bins, channels, rank)
+            res = x - u @ (np.conj(u.transpose(0, 2, 1)) @ x)
+            out = np.ascontiguousarray(res.transpose(1, 2, 0))
+        now = (x @ np.conj(x.transpose(0, 2, 1))) / x.shape[-1]
+        if st.cov is None:
+            st.cov = now
+        else:
+            window_s = cfg.window_frames * cfg.hop / cfg.fs
+            a = np.float32(np.exp(-window_s / cfg.interference_memory_s))
+            st.cov = a * st.cov + (1 - a) * now
+        st.cov_windows += 1
+        return out
+
+    def _search(self, gcc: np.ndarray, n_eff: float, rest: np.ndarray | None = None
+                ) -> tuple[np.ndarray, list[tuple[float, int, float]]]:
         """Coarse-to-fine multi-source search; returns the first coarse map and (power, fine index,
         significance) of each detection.
 
         After each source is found, its TDOA is masked out of every pair's GCC before the next
         scan (as in ODAS, Grondin and Michaud 2019), so its lobes do not hide weaker sources.
+        ``rest``: the GCC of the interference-cancelled spectra (same weights), scanned after the first
+        source instead of ``gcc`` (its found TDOAs masked the same way).
         The search stops at the first peak that fails the significance test (module docstring).
         """
         cfg = self.config
@@ -460,6 +512,8 @@ class Localizer:
                 break
             peaks.append((best[0], best[1], z))
             if k + 1 < cfg.n_sources:
+                if k == 0 and rest is not None:
+                    work = rest
                 centre = self._fine_pos[:, best[1]]
                 work = np.where(np.abs(self._lag_axis[None, :] - centre[:, None]) <= self._mask_halfwidth, 0.0, work)
         if srp_map is None:
