@@ -39,6 +39,12 @@ from ssl_core.peaks import local_maxima, neighbour_table
 from ssl_core.pooling import DirectionPool
 from ssl_core.srp import SOUND_SPEED, SteeringTable, tdoa_table
 
+# interference_rescan's novelty weight w = clip(1 - g / q, 0, 1): g = 3 and the rescan memory 0.8 s were
+# the best of g in {2, 3, 4} x memory {0.6, 0.8, 1.2 s} x covariance memory {1.5, 3 s} on the real-chain
+# rooms of tests/test_hearing.py (README, "Telling a victim from a machine"); ridge: 1 % of the mean
+# eigenvalue keeps R invertible where few frames have filled it (0.1 % and 10 % measured the same).
+_NOVELTY_GAIN = 3.0
+_NOVELTY_RIDGE = 0.01
 _TABLE_BYTES_PER_POINT_PAIR = 48  # peak bytes of building the tables, per fine point and pair: tracemalloc, 45-48 at 0.5-1.5 deg
 
 
@@ -89,13 +95,14 @@ class LocalizerConfig:
     # SRP-PHAT; steady sources (a loudspeaker playing noise) are then localizable too.
     noise_suppression: bool = False
     noise_memory_s: float = 1.5           # how far back the noise floor looks
-    # Interference cancellation for the search after the first source (see _Stream.cov): per bin, the
-    # ``interference_rank`` dominant eigenvectors of the array's recent spatial covariance (memory
-    # ``interference_memory_s``) - the loudest steady source's direct path *and* its early reflections -
-    # are projected out of the spectra before PHAT, so a weaker talker beside a loud machine shows in the
-    # rescan. 0 = off (the paper's search: mask the found TDOA, rescan the same map).
-    interference_rank: int = 0
+    # Rescan beside a loud machine (n_sources > 1; see Localizer._spatial_novelty): after the first
+    # source, the search scans a GCC whose time-frequency bins are weighted by how far each frame departs
+    # from the array's recent spatial covariance (memory ``interference_memory_s``), summed over the
+    # recent windows (memory ``rescan_memory_s``). A steady machine's direct path *and* reflections match
+    # that covariance and fade; a talker's bursts stand out. Off = the paper's rescan of the same map.
+    interference_rescan: bool = False
     interference_memory_s: float = 1.5
+    rescan_memory_s: float = 0.8
     upsample: int = 4                     # GCC interpolation factor
     sound_speed: float = SOUND_SPEED      # m/s
 
@@ -120,9 +127,8 @@ class LocalizerConfig:
         need(self.upsample >= 1, "upsample", "an integer >= 1")
         need(self.sound_speed > 0, "sound_speed", "> 0 m/s")
         need(self.noise_memory_s > 0, "noise_memory_s", "> 0 s")
-        need(isinstance(self.interference_rank, (int, np.integer)) and 0 <= self.interference_rank <= 2,
-             "interference_rank", "an integer 0 (off), 1 or 2 (dominant covariance eigenvectors projected out)")
         need(self.interference_memory_s > 0, "interference_memory_s", "> 0 s")
+        need(self.rescan_memory_s > 0, "rescan_memory_s", "> 0 s")
         if self.n_sources > 1:
             need(self.min_separation_deg >= 2 * self.coarse_resolution_deg, "min_separation_deg",
                  f">= 2 x coarse_resolution_deg = {2 * self.coarse_resolution_deg:g} degrees: the coarse grid is "
@@ -153,10 +159,12 @@ class _Stream:
     floor: NoiseFloor | None
     start_time: float = 0.0
     frames_done: int = 0
-    # Recursive spatial covariance (bins, channels, channels) of the active frames, for interference
-    # cancellation; None until the first active window (or when interference_rank is 0).
+    # interference_rescan: recursive spatial covariance (bins, channels, channels) of the active frames
+    # (None until the first active window), and the running sums of the novelty-weighted GCC, its weights
+    # and squared weights over n_eff (for the rescan map and its significance scale).
     cov: np.ndarray | None = None
     cov_windows: int = 0
+    rescan: tuple[np.ndarray, float, float] | None = None
 
 
 class Localizer:
@@ -425,11 +433,9 @@ class Localizer:
         spec_a = spec[:, active]
         w_a = None if weights is None else weights[active]
         gcc, w_sum, n_eff = self._gcc(spec_a, w_a)
-        rest = None
-        if self.config.interference_rank and self.config.n_sources > 1:
-            cleaned = self._cancel_interference(spec_a, st)
-            rest = None if cleaned is None else self._gcc(cleaned, w_a)[0]
-        srp_map, peaks = self._search(gcc, n_eff, rest)
+        rescan = self._rescan_gcc(spec_a, w_a, st) if self.config.interference_rescan and \
+            self.config.n_sources > 1 else None
+        srp_map, peaks = self._search(gcc, n_eff, rescan)
         detections = []
         for power, f, z in peaks:
             u = self.fine_grid.directions[f]
@@ -437,45 +443,60 @@ class Localizer:
             detections.append(Detection(float(az), float(el), u.copy(), power, self._beam_level(spec_a, f), z))
         return LocalizationResult(t_end, detections, srp_map, n_active, level, gcc, w_sum, n_eff)
 
-    def _cancel_interference(self, spec: np.ndarray, st: _Stream) -> np.ndarray | None:
-        """Active-frame spectra (channels, frames, bins) with the dominant subspace of the covariance
-        of the *previous* windows projected out, ``X - U U^H X`` per bin (None while that covariance is
-        younger than one window); then this window enters the covariance.
-
-        Why a covariance and not a steering vector: in a reverberant room a machine's spatial signature
-        per bin is its room transfer function, direct path plus early reflections; its dominant
-        eigenvector holds all of that, which masking the direct path's TDOA misses (measured: the
-        machine's reflections then outnumber a talker's direct path in the rescan). A steady machine
-        dominates a covariance of ~1.5 s, an intermittent talker does not, so projecting out rank 1 keeps her.
-        Sensor and diffuse noise have a real-symmetric covariance, whose eigenvectors (so ``P``) are
-        real: the residual's correlations stay even in the lag and the significance test keeps its meaning."""
+    def _rescan_gcc(self, spec: np.ndarray, weights: np.ndarray | None, st: _Stream
+                    ) -> tuple[np.ndarray, float] | None:
+        """The GCC (pairs, lags) and effective bin count the search scans after its first source, or None
+        while the covariance is younger than two windows. Each time-frequency bin is weighted by its spatial
+        novelty (:meth:`_spatial_novelty`) times ``weights``; the weighted GCCs are summed over the recent
+        windows (exponential memory ``rescan_memory_s``), since a talker's direct path is consistent over
+        a second while a machine's residue is not. Then this window enters the covariance."""
         cfg = self.config
         x = spec.transpose(2, 0, 1)  # (bins, channels, frames)
         out = None
         if st.cov is not None and st.cov_windows >= 2:
-            _, vec = np.linalg.eigh(st.cov)                    # ascending eigenvalues per bin
-            u = vec[..., -cfg.interference_rank:]               # (bins, channels, rank)
-            res = x - u @ (np.conj(u.transpose(0, 2, 1)) @ x)
-            out = np.ascontiguousarray(res.transpose(1, 2, 0))
-        now = (x @ np.conj(x.transpose(0, 2, 1))) / x.shape[-1]
-        if st.cov is None:
-            st.cov = now
-        else:
+            w = self._spatial_novelty(x, st.cov)
+            g, w_sum, n_eff = self._gcc(spec, w if weights is None else w * weights)
             window_s = cfg.window_frames * cfg.hop / cfg.fs
-            a = np.float32(np.exp(-window_s / cfg.interference_memory_s))
-            st.cov = a * st.cov + (1 - a) * now
+            keep = np.exp(-window_s / cfg.rescan_memory_s)
+            g_acc, w_acc, w2_acc = st.rescan if st.rescan is not None else (0.0, 0.0, 0.0)
+            if w_sum > 0:
+                g_acc, w_acc, w2_acc = keep * g_acc + w_sum * g, keep * w_acc + w_sum, keep * w2_acc + w_sum**2 / n_eff
+                st.rescan = (g_acc, w_acc, w2_acc)
+            if w_acc > 0:
+                out = (g_acc / w_acc, w_acc**2 / w2_acc)
+        now = (x @ np.conj(x.transpose(0, 2, 1))) / x.shape[-1]
+        a = np.float32(np.exp(-cfg.window_frames * cfg.hop / cfg.fs / cfg.interference_memory_s))
+        st.cov = now if st.cov is None else a * st.cov + (1 - a) * now
         st.cov_windows += 1
         return out
 
-    def _search(self, gcc: np.ndarray, n_eff: float, rest: np.ndarray | None = None
+    @staticmethod
+    def _spatial_novelty(x: np.ndarray, cov: np.ndarray) -> np.ndarray:
+        """Weights (frames, bins) in [0, 1] of frames ``x`` (bins, channels, frames) against the recent
+        spatial covariance ``cov`` (bins, channels, channels): ``w = clip(1 - g / q, 0, 1)`` with
+        ``q = x^H R^-1 x / M`` (mean 1 for frames drawn from ``R``; large for a new direction or a burst).
+
+        Why: a machine's spatial signature in a reverberant room is its room transfer function, direct
+        path plus reflections; masking its direct-path TDOA leaves the reflections, which outnumbered
+        a talker's direct path in the rescan (measured, README). ``R`` holds all of it, so frames that
+        only repeat the machine get ``q`` near 1 and weight 0. Projecting the dominant eigenvector out of
+        the spectra instead (``X - u u^H X``) did not help: at low frequencies every steering vector of a
+        15 cm array lies near ``u``, and the projection scrambles the talker's phases there (measured)."""
+        m = x.shape[1]
+        ridge = _NOVELTY_RIDGE * np.trace(cov, axis1=1, axis2=2).real / m
+        y = np.linalg.solve(cov + ridge[:, None, None] * np.eye(m, dtype=cov.dtype), x)
+        q = (np.conj(x) * y).sum(axis=1).real / m
+        return np.clip(1.0 - _NOVELTY_GAIN / np.maximum(q, 1e-12), 0.0, 1.0).T.astype(np.float32)
+
+    def _search(self, gcc: np.ndarray, n_eff: float, rescan: tuple[np.ndarray, float] | None = None
                 ) -> tuple[np.ndarray, list[tuple[float, int, float]]]:
         """Coarse-to-fine multi-source search; returns the first coarse map and (power, fine index,
         significance) of each detection.
 
         After each source is found, its TDOA is masked out of every pair's GCC before the next
         scan (as in ODAS, Grondin and Michaud 2019), so its lobes do not hide weaker sources.
-        ``rest``: the GCC of the interference-cancelled spectra (same weights), scanned after the first
-        source instead of ``gcc`` (its found TDOAs masked the same way).
+        ``rescan``: (GCC, effective bins) scanned after the first source instead of ``gcc`` (found TDOAs
+        masked the same way, the significance scaled by its own bin count; see ``interference_rescan``).
         The search stops at the first peak that fails the significance test (module docstring).
         """
         cfg = self.config
@@ -512,8 +533,8 @@ class Localizer:
                 break
             peaks.append((best[0], best[1], z))
             if k + 1 < cfg.n_sources:
-                if k == 0 and rest is not None:
-                    work = rest
+                if k == 0 and rescan is not None:
+                    work, z_scale = rescan[0], np.sqrt(max(rescan[1], 0.0) * self._pairs_in_use())
                 centre = self._fine_pos[:, best[1]]
                 work = np.where(np.abs(self._lag_axis[None, :] - centre[:, None]) <= self._mask_halfwidth, 0.0, work)
         if srp_map is None:
