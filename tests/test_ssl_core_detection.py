@@ -22,8 +22,14 @@ FS = 16000
 LAB = Lab()
 
 
-def test_no_source_gives_at_most_one_percent_false_windows():
-    loc = Localizer("cube8", LocalizerConfig())
+# The interference rescan (n_sources > 1) only acts after a first detection; with it on, the no-source
+# tests must hold unchanged (measured: the same 0 of 279 windows at the default gate, 2 at the tracking gate).
+_RESCAN = LocalizerConfig(n_sources=2, interference_rescan=True, noise_suppression=True)
+
+
+@pytest.mark.parametrize("config", [LocalizerConfig(), _RESCAN], ids=["default", "rescan"])
+def test_no_source_gives_at_most_one_percent_false_windows(config):
+    loc = Localizer("cube8", config)
     n_windows = n_false = 0
     for k, (spectrum, level) in enumerate((("hvac", 45.0), ("pink", 60.0), ("white", 40.0))):
         sim = AcousticSimulator(World(room=Room(LAB.room_size), name="lab"),
@@ -94,12 +100,15 @@ def test_voice_beside_an_equal_steady_noise_is_tracked_with_noise_suppression():
     assert on_voice[active].sum() >= 0.7 * active.sum(), (on_voice.astype(int), active.astype(int))
 
 
-def test_no_source_gives_no_lasting_track_at_the_tracking_gate():
+@pytest.mark.parametrize("config", [LocalizerConfig(), _RESCAN], ids=["default", "rescan"])
+def test_no_source_gives_no_lasting_track_at_the_tracking_gate(config):
     """Diffuse noise with no source, detections at the looser gate meant for tracking: no confirmed
     track lasts over 1 s (the issue's requirement; the tracker's confirmation is the false-alarm control)."""
+    from dataclasses import replace
+
     from ssl_core.tracking import TRACKING_MIN_SIGNIFICANCE, Tracker
 
-    loc = Localizer("cube8", LocalizerConfig(min_significance=TRACKING_MIN_SIGNIFICANCE))
+    loc = Localizer("cube8", replace(config, min_significance=TRACKING_MIN_SIGNIFICANCE))
     n_detections = 0
     for k, (spectrum, level) in enumerate((("hvac", 45.0), ("pink", 60.0), ("white", 40.0))):
         sim = AcousticSimulator(World(room=Room(LAB.room_size), name="lab"),
@@ -111,3 +120,29 @@ def test_no_source_gives_no_lasting_track_at_the_tracking_gate():
                 life.setdefault(t.id, [r.time, r.time])[1] = r.time
         assert all(end - start <= 1.0 for start, end in life.values()), (spectrum, life)
     assert n_detections > 0  # the looser gate does let false peaks through: the tracker is what holds
+
+
+def test_a_machine_alone_gives_fewer_ghosts_with_the_interference_rescan():
+    """A real machinery recording alone, 2 m away in an RT60 0.6 s room, two sources per window at the
+    tracking gate: every detection more than 20 deg from the machine is a ghost (its reflections). The
+    interference rescan must at least halve them and shorten the longest ghost track (measured on this
+    case, 'mill': 47 -> 16 ghost windows of 124, longest ghost track 12.2 -> 6.4 s)."""
+    from sound_dataset import room_case
+    from ssl_core.tracking import TRACKING_MIN_SIGNIFICANCE, Tracker
+
+    x, (_, u_machine), _ = room_case("it_carlo", "mill", 170, 90, sir_db=0.0, with_talker=False)
+    ghosts, longest = {}, {}
+    for on in (False, True):
+        loc = Localizer("cube8", LocalizerConfig(noise_suppression=True, n_sources=2, interference_rescan=on,
+                                                 min_significance=TRACKING_MIN_SIGNIFICANCE))
+        tracker, life, n = Tracker(), {}, 0
+        for r in loc.process_all(x):
+            n += any(np.rad2deg(angular_distance(d.direction, u_machine)) > 20 for d in r.detections)
+            for t in tracker.update(r.detections, r.time):
+                if np.rad2deg(angular_distance(t.direction, u_machine)) > 20:
+                    life.setdefault(t.id, [r.time, r.time])[1] = r.time
+        ghosts[on], longest[on] = n, max([0.0] + [e - s for s, e in life.values()])
+    print("ghost windows without / with the rescan:", ghosts, "longest ghost track (s):", longest)
+    assert ghosts[False] >= 10                      # the case does have reflections to lose
+    assert ghosts[True] <= 0.5 * ghosts[False], ghosts
+    assert longest[True] < longest[False], longest
