@@ -12,8 +12,9 @@ Rows:
 - ``engine+NS/window``: the same with noise suppression;
 - ``engine+track``: confirmed tracks of ssl_core.tracking.Tracker per window, detections at the tracking
   gate (``TRACKING_MIN_SIGNIFICANCE``); ``engine+NS+track`` with noise suppression;
-- ``engine+NS+IR+track``: as ``engine+NS+track`` with two sources per window at least and the interference
-  rescan (``LocalizerConfig.interference_rescan``; the pump, a second source, counts as false);
+- ``engine+NS+2+track``: as ``engine+NS+track`` with two sources per window at least (the pump, a second
+  source, counts as false); ``engine+NS+IR+track`` the same with the interference rescan
+  (``LocalizerConfig.interference_rescan``);
 - ``whole recording``: ``Localizer.locate`` (what ``ssl-locate REC.wav`` prints), one answer per trial;
   ``+NS`` with noise suppression (``ssl-locate --noise-suppression``);
 - ``pra SRP`` / ``pra NormMUSIC``: pyroomacoustics on the first windows of each trial (they are slow),
@@ -139,10 +140,10 @@ def _tracker_class():
         return None
 
 
-def run_engine(trials, k: int, noise_suppression=False, track=False, rescan=False) -> dict:
+def run_engine(trials, k: int, noise_suppression=False, track=False, rescan=False, two=False) -> dict:
     from ssl_core.localizer import Localizer, LocalizerConfig
 
-    cfg = LocalizerConfig(n_sources=max(k, 2) if rescan else k, noise_suppression=noise_suppression,
+    cfg = LocalizerConfig(n_sources=max(k, 2) if rescan or two else k, noise_suppression=noise_suppression,
                           interference_rescan=rescan)
     if track:  # the gate the tracker is tuned for
         from ssl_core.tracking import TRACKING_MIN_SIGNIFICANCE
@@ -266,6 +267,7 @@ def main() -> None:
             "engine+NS/window": lambda t, k: run_engine(t, k, noise_suppression=True),
             "engine+track": lambda t, k: run_engine(t, k, track=True),
             "engine+NS+track": lambda t, k: run_engine(t, k, noise_suppression=True, track=True),
+            "engine+NS+2+track": lambda t, k: run_engine(t, k, noise_suppression=True, track=True, two=True),
             "engine+NS+IR+track": lambda t, k: run_engine(t, k, noise_suppression=True, track=True, rescan=True),
             "whole recording": lambda t, k: run_whole(t, k),
             "whole recording+NS": lambda t, k: run_whole(t, k, noise_suppression=True),
