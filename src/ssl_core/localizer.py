@@ -43,7 +43,8 @@ from ssl_core.srp import SOUND_SPEED, SteeringTable, tdoa_table
 # the best of g in {2, 3, 4} x memory {0.6, 0.8, 1.2 s} x covariance memory {1.5, 3 s} on the real-chain
 # rooms of tests/test_hearing.py, and again of g {2, 3} x memory {0.8, 1.2, 2 s} with the peak-elsewhere
 # rule (README, "Telling a victim from a machine"); ridge: 1 % of the mean
-# eigenvalue keeps R invertible where few frames have filled it (0.1 % and 10 % measured the same).
+# eigenvalue keeps R invertible where few frames have filled it (0.1 % and 10 % measured within a few
+# windows of it per room).
 _NOVELTY_GAIN = 3.0
 _NOVELTY_RIDGE = 0.01
 _TABLE_BYTES_PER_POINT_PAIR = 48  # peak bytes of building the tables, per fine point and pair: tracemalloc, 45-48 at 0.5-1.5 deg
@@ -204,8 +205,8 @@ class Localizer:
         self._fine = SteeringTable(tdoa_f, cfg.fs, cfg.upsample, self._max_lag)
         self._fine_pos = (tdoa_f * cfg.fs * cfg.upsample).astype(np.float32)  # lag of each fine point, per pair
         self._lag_axis = np.arange(-self._max_lag, self._max_lag + 1, dtype=np.float32)
-        chunk_s = cfg.window_frames * cfg.hop / cfg.fs
-        self._noise_memory = max(1, int(np.ceil(cfg.noise_memory_s / chunk_s)))
+        self._window_s = cfg.window_frames * cfg.hop / cfg.fs  # the hop between windows (s)
+        self._noise_memory = max(1, int(np.ceil(cfg.noise_memory_s / self._window_s)))
         self._lag_steering = LagSteering(self._omega, self._lag_axis / (cfg.fs * cfg.upsample))
         # Masking a found source: half the GCC main lobe, 1 / (2 f_high).
         f_high = cfg.band_hz[1] if cfg.band_hz else cfg.fs / 2
@@ -459,8 +460,7 @@ class Localizer:
         if st.cov is not None and st.cov_windows >= 2:
             w = self._spatial_novelty(x, st.cov)
             g, w_sum, n_eff = self._gcc(spec, w if weights is None else w * weights)
-            window_s = cfg.window_frames * cfg.hop / cfg.fs
-            keep = np.exp(-window_s / cfg.rescan_memory_s)
+            keep = np.exp(-self._window_s / cfg.rescan_memory_s)
             g_acc, w_acc, w2_acc = st.rescan if st.rescan is not None else (0.0, 0.0, 0.0)
             if w_sum > 0:
                 g_acc, w_acc, w2_acc = keep * g_acc + w_sum * g, keep * w_acc + w_sum, keep * w2_acc + w_sum**2 / n_eff
@@ -468,7 +468,7 @@ class Localizer:
             if w_acc > 0:
                 out = (g_acc / w_acc, w_acc**2 / w2_acc)
         now = (x @ np.conj(x.transpose(0, 2, 1))) / x.shape[-1]
-        a = np.float32(np.exp(-cfg.window_frames * cfg.hop / cfg.fs / cfg.interference_memory_s))
+        a = np.float32(np.exp(-self._window_s / cfg.interference_memory_s))
         st.cov = now if st.cov is None else a * st.cov + (1 - a) * now
         st.cov_windows += 1
         return out
