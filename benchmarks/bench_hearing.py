@@ -12,6 +12,9 @@ Rows:
 - ``engine+NS/window``: the same with noise suppression;
 - ``engine+track``: confirmed tracks of ssl_core.tracking.Tracker per window, detections at the tracking
   gate (``TRACKING_MIN_SIGNIFICANCE``); ``engine+NS+track`` with noise suppression;
+- ``engine+NS+2+track``: as ``engine+NS+track`` with two sources per window at least (the pump, a second
+  source, counts as false); ``engine+NS+IR+track`` the same with the interference rescan
+  (``LocalizerConfig.interference_rescan``);
 - ``whole recording``: ``Localizer.locate`` (what ``ssl-locate REC.wav`` prints), one answer per trial;
   ``+NS`` with noise suppression (``ssl-locate --noise-suppression``);
 - ``pra SRP`` / ``pra NormMUSIC``: pyroomacoustics on the first windows of each trial (they are slow),
@@ -21,7 +24,8 @@ an output farther than 10 deg from every talker (the pump counts as false), ``er
 of the hits. Whole recording: ``hit %`` trials with every talker within 10 deg, ``err`` median error.
 Then CPU per second of audio (detection, + tracking when available) at the 1.5 deg grid, in child
 processes: default environment (BLAS pinned by ssl_core), default environment with the pin disabled,
-and OPENBLAS_NUM_THREADS=1. Prints a markdown table and one JSON line.
+and OPENBLAS_NUM_THREADS=1; and, pinned, two sources per window without and with the interference rescan
+(its cost: a covariance update and an 8x8 solve per bin and window). Prints a markdown table and one JSON line.
 """
 from __future__ import annotations
 
@@ -31,6 +35,7 @@ import os
 import subprocess
 import sys
 import time
+from dataclasses import replace
 from pathlib import Path
 
 ROOT = Path(__file__).resolve().parents[1]
@@ -135,14 +140,14 @@ def _tracker_class():
         return None
 
 
-def run_engine(trials, k: int, noise_suppression=False, track=False) -> dict:
+def run_engine(trials, k: int, noise_suppression=False, track=False, rescan=False, two=False) -> dict:
     from ssl_core.localizer import Localizer, LocalizerConfig
 
-    cfg = LocalizerConfig(n_sources=k, noise_suppression=noise_suppression)
+    cfg = LocalizerConfig(n_sources=max(k, 2) if rescan or two else k, noise_suppression=noise_suppression,
+                          interference_rescan=rescan)
     if track:  # the gate the tracker is tuned for
         from ssl_core.tracking import TRACKING_MIN_SIGNIFICANCE
-        cfg = LocalizerConfig(n_sources=k, noise_suppression=noise_suppression,
-                              min_significance=TRACKING_MIN_SIGNIFICANCE)
+        cfg = replace(cfg, min_significance=TRACKING_MIN_SIGNIFICANCE)
     loc = Localizer("cube8", cfg)
     tally = _Tally()
     Tracker = _tracker_class()
@@ -193,7 +198,7 @@ def run_pra(name: str, trials, k: int, n_windows: int) -> dict:
 
 
 # ----------------------------------------------------------------------------------------- CPU
-def cpu_child(seconds: float, pin: bool) -> dict:
+def cpu_child(seconds: float, pin: bool, n_sources: int = 1, rescan: bool = False) -> dict:
     """CPU (process_time) per second of audio of detection (+ tracking) at the 1.5 deg grid, this process."""
     import ssl_core.localizer as L
     from experiments.common import Lab, Truth, build_sim
@@ -204,10 +209,10 @@ def cpu_child(seconds: float, pin: bool) -> dict:
     x = build_sim(lab, [Truth(40.0, 10.0, 1.5)], 1).listen_pose(lab.pose, seconds, mount=lab.mount)
     Tracker = _tracker_class()
     tracker = Tracker() if Tracker else None
-    cfg = L.LocalizerConfig()
+    cfg = L.LocalizerConfig(n_sources=n_sources, interference_rescan=rescan)
     if tracker is not None:
         from ssl_core.tracking import TRACKING_MIN_SIGNIFICANCE
-        cfg = L.LocalizerConfig(min_significance=TRACKING_MIN_SIGNIFICANCE)
+        cfg = replace(cfg, min_significance=TRACKING_MIN_SIGNIFICANCE)
     loc = L.Localizer("cube8", cfg)
     loc.process(x[:, :FS])  # warm-up
     loc.reset()
@@ -225,13 +230,15 @@ def cpu_child(seconds: float, pin: bool) -> dict:
 
 
 def cpu_table(seconds: float) -> dict:
-    modes = {"default env (pinned)": ({}, True), "default env, pin off": ({}, False),
-             "OPENBLAS_NUM_THREADS=1": ({"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}, True)}
+    modes = {"default env (pinned)": ({}, []), "default env, pin off": ({}, ["--no-pin"]),
+             "OPENBLAS_NUM_THREADS=1": ({"OPENBLAS_NUM_THREADS": "1", "OMP_NUM_THREADS": "1"}, []),
+             "pinned, 2 sources": ({}, ["--cpu-sources", "2"]),
+             "pinned, 2 sources + IR": ({}, ["--cpu-sources", "2", "--cpu-rescan"])}
     out = {}
-    for name, (extra, pin) in modes.items():
+    for name, (extra, flags) in modes.items():
         env = {k: v for k, v in os.environ.items() if k not in ("OPENBLAS_NUM_THREADS", "OMP_NUM_THREADS")}
         env.update(extra)
-        res = subprocess.run([sys.executable, __file__, "--cpu-child", str(seconds)] + ([] if pin else ["--no-pin"]),
+        res = subprocess.run([sys.executable, __file__, "--cpu-child", str(seconds)] + flags,
                              capture_output=True, text=True, env=env, check=True)
         out[name] = json.loads(res.stdout.strip().splitlines()[-1])
     return out
@@ -247,9 +254,11 @@ def main() -> None:
     ap.add_argument("--methods", default=None, help="comma-separated rows to run (default: all); cpu = the CPU part")
     ap.add_argument("--cpu-child", type=float, default=None, help=argparse.SUPPRESS)
     ap.add_argument("--no-pin", action="store_true", help=argparse.SUPPRESS)
+    ap.add_argument("--cpu-sources", type=int, default=1, help=argparse.SUPPRESS)
+    ap.add_argument("--cpu-rescan", action="store_true", help=argparse.SUPPRESS)
     a = ap.parse_args()
     if a.cpu_child is not None:
-        print(json.dumps(cpu_child(a.cpu_child, not a.no_pin)))
+        print(json.dumps(cpu_child(a.cpu_child, not a.no_pin, a.cpu_sources, a.cpu_rescan)))
         return
     if a.quick:
         a.trials, a.seconds, a.pra_windows = 1, 2.0, 2
@@ -258,6 +267,8 @@ def main() -> None:
             "engine+NS/window": lambda t, k: run_engine(t, k, noise_suppression=True),
             "engine+track": lambda t, k: run_engine(t, k, track=True),
             "engine+NS+track": lambda t, k: run_engine(t, k, noise_suppression=True, track=True),
+            "engine+NS+2+track": lambda t, k: run_engine(t, k, noise_suppression=True, track=True, two=True),
+            "engine+NS+IR+track": lambda t, k: run_engine(t, k, noise_suppression=True, track=True, rescan=True),
             "whole recording": lambda t, k: run_whole(t, k),
             "whole recording+NS": lambda t, k: run_whole(t, k, noise_suppression=True),
             "pra SRP": lambda t, k: run_pra("SRP", t, k, a.pra_windows),

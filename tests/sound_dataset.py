@@ -76,9 +76,10 @@ ROOM_CASES = [("it_carlo", "ore_mine", 30, -50), ("fr_june", "industry_light", 1
 
 
 def room_case(talker: str, machine: str, az_t: float, az_m: float, seconds: int = 16, sir_db: float = -6.0,
-              rt60_s: float = 0.6):
+              rt60_s: float = 0.6, with_talker: bool = True):
     """The cube array in a 7 x 6 x 3.2 m room of ``rt60_s`` (ssl_sim), a talker (test part, looped) and a
-    machine recording ``-sir_db`` dB louder (talker level = RMS while talking, machine = RMS), 2 m away.
+    machine recording ``-sir_db`` dB louder (talker level = RMS while talking, machine = RMS), 2 m away;
+    ``with_talker=False``: the machine alone (her direction and talking seconds still returned).
     Returns (int16 (8, n) audio, the two true unit directions (array frame), per 1 s: does she talk?)."""
     from ssl_sim.acoustics import AcousticConfig, AcousticSimulator, RobotPose
     from ssl_sim.acoustics.pose import ArrayMount
@@ -97,6 +98,7 @@ def room_case(talker: str, machine: str, az_t: float, az_m: float, seconds: int 
     active_rms = np.sqrt((fr[talking] ** 2).mean())
     srcs = [SoundSource(tuple(c + 2.0 * dirs[0]), LoopedSignal(speech / active_rms, FS, normalise=False), 62.0),
             SoundSource(tuple(c + 2.0 * dirs[1]), LoopedSignal(rec[machine].samples, FS), 62.0 - sir_db)]
+    srcs = srcs if with_talker else srcs[1:]
     sim = AcousticSimulator(World(room=Room((7.0, 6.0, 3.2))), AcousticConfig(rt60_s=rt60_s, seed=1), srcs)
     x = sim.listen_pose(pose, float(seconds), mount=mount)
     per_s = FS // _FRAME

@@ -22,8 +22,14 @@ FS = 16000
 LAB = Lab()
 
 
-def test_no_source_gives_at_most_one_percent_false_windows():
-    loc = Localizer("cube8", LocalizerConfig())
+# The interference rescan (n_sources > 1) only acts after a first detection; with it on, the no-source
+# tests must hold unchanged (measured: the same 0 of 279 windows at the default gate, 2 at the tracking gate).
+_RESCAN = LocalizerConfig(n_sources=2, interference_rescan=True, noise_suppression=True)
+
+
+@pytest.mark.parametrize("config", [LocalizerConfig(), _RESCAN], ids=["default", "rescan"])
+def test_no_source_gives_at_most_one_percent_false_windows(config):
+    loc = Localizer("cube8", config)
     n_windows = n_false = 0
     for k, (spectrum, level) in enumerate((("hvac", 45.0), ("pink", 60.0), ("white", 40.0))):
         sim = AcousticSimulator(World(room=Room(LAB.room_size), name="lab"),
@@ -94,12 +100,15 @@ def test_voice_beside_an_equal_steady_noise_is_tracked_with_noise_suppression():
     assert on_voice[active].sum() >= 0.7 * active.sum(), (on_voice.astype(int), active.astype(int))
 
 
-def test_no_source_gives_no_lasting_track_at_the_tracking_gate():
+@pytest.mark.parametrize("config", [LocalizerConfig(), _RESCAN], ids=["default", "rescan"])
+def test_no_source_gives_no_lasting_track_at_the_tracking_gate(config):
     """Diffuse noise with no source, detections at the looser gate meant for tracking: no confirmed
     track lasts over 1 s (the issue's requirement; the tracker's confirmation is the false-alarm control)."""
+    from dataclasses import replace
+
     from ssl_core.tracking import TRACKING_MIN_SIGNIFICANCE, Tracker
 
-    loc = Localizer("cube8", LocalizerConfig(min_significance=TRACKING_MIN_SIGNIFICANCE))
+    loc = Localizer("cube8", replace(config, min_significance=TRACKING_MIN_SIGNIFICANCE))
     n_detections = 0
     for k, (spectrum, level) in enumerate((("hvac", 45.0), ("pink", 60.0), ("white", 40.0))):
         sim = AcousticSimulator(World(room=Room(LAB.room_size), name="lab"),
@@ -111,3 +120,28 @@ def test_no_source_gives_no_lasting_track_at_the_tracking_gate():
                 life.setdefault(t.id, [r.time, r.time])[1] = r.time
         assert all(end - start <= 1.0 for start, end in life.values()), (spectrum, life)
     assert n_detections > 0  # the looser gate does let false peaks through: the tracker is what holds
+
+
+def test_the_interference_rescan_finds_a_talker_beside_a_machine_and_adds_no_ghosts():
+    """Real recordings 2 m away in an RT60 0.6 s room (tests/sound_dataset.py): a talker at 30 deg beside
+    a machine at -50 deg of equal level (0 dB SIR), and the machine alone; two sources per window at the
+    tracking gate. With the rescan a detection within 10 deg of her comes in at least twice as many of
+    her windows (measured 13 -> 57 of 109), and with the machine alone the detections more than 20 deg
+    from it (its reflections) do not grow (measured 4 -> 4 of 124)."""
+    from sound_dataset import room_case
+    from ssl_core.tracking import TRACKING_MIN_SIGNIFICANCE
+
+    case = ("it_carlo", "ore_mine", 30, -50)
+    mix, (u_her, u_machine), talks = room_case(*case, sir_db=0.0)
+    alone = room_case(*case, sir_db=0.0, with_talker=False)[0]
+    her, ghosts = {}, {}
+    for on in (False, True):
+        loc = Localizer("cube8", LocalizerConfig(noise_suppression=True, n_sources=2, interference_rescan=on,
+                                                 min_significance=TRACKING_MIN_SIGNIFICANCE))
+        her[on] = sum(any(np.rad2deg(angular_distance(d.direction, u_her)) <= 10 for d in r.detections)
+                      for r in loc.process_all(mix) if r.time >= 2 and talks[min(int(r.time), len(talks) - 1)])
+        ghosts[on] = sum(any(np.rad2deg(angular_distance(d.direction, u_machine)) > 20 for d in r.detections)
+                         for r in loc.process_all(alone))
+    print("her windows without / with the rescan:", her, "machine-alone ghost windows:", ghosts)
+    assert her[True] >= 2 * max(her[False], 5), her
+    assert ghosts[True] <= ghosts[False], ghosts

@@ -176,6 +176,8 @@ def test_sample_rate_mismatch(loc):
         (dict(el_min_deg=50.0, el_max_deg=10.0), "elevation"),
         (dict(min_significance=-1.0), "min_significance"),
         (dict(min_power=1.5), "min_power"),
+        (dict(interference_memory_s=0.0), "interference_memory_s"),
+        (dict(rescan_memory_s=-1.0), "rescan_memory_s"),
         (dict(resolution_deg=0.1), "max_table_mb"),  # ~5.5 GB of tables: refused before anything is built
     ],
 )
