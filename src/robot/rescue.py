@@ -222,6 +222,8 @@ class RescueBehaviour:
         self.plan: Plan | None = None
         self._silent = 0
         self._close_listens: dict[int, int] = {}
+        self._unheard_at: dict[int, int] = {}     # listens at a source's estimate that did not hear it
+        self._cue: dict[int, str] = {}            # the found cue a source showed in an earlier listen
         self._target_contacts: dict[int, int] = {}
         self._side = 1.0                          # alternating side of baseline steps
         self._faults_seen: tuple[str, ...] = ()
@@ -378,15 +380,32 @@ class RescueBehaviour:
                 crit = (f"map estimate {d:.2f} m away (<= {cfg.found_distance_m:g}), +- "
                         f"{s.horizontal_sigma_m:.2f} m from {s.n_inliers} listens")
             reached = d <= cfg.found_distance_m and s.horizontal_sigma_m <= cfg.found_sigma_m and s.triangulated
+            if crit is not None:
+                self._cue[sid] = crit
+            elif reached and sid in self._cue:
+                # It showed a found cue from here before and is silent now: a caller pauses (measured, light rubble
+                # seed 7: the caller behind the pillar heard steep and 10-18 dB louder in three listens, then
+                # rejected as a reflection on the fourth, in which it did not call).
+                crit = f"{self._cue[sid]}, in an earlier listen; map estimate {d:.2f} m away"
             if crit is None and reached and not self._approachable(s):
                 crit = f"map estimate {d:.2f} m away, +- {s.horizontal_sigma_m:.2f} m"   # a machine: no elevation cue
             elif crit is None and reached:
                 # At its estimate and no cue says a mouth is here: listen a few times, then it is a reflection
                 # (a mirror image beyond a wall triangulates as tightly as a caller: measured in light rubble).
-                if self._listen_again(s, f"at the estimate of source #{s.id} ({d:.2f} m), no found cue yet"):
+                # Only a listen that hears it without a cue counts (a caller who pauses says nothing); listens that
+                # do not hear it at all end the wait after twice as many.
+                if ev is None:
+                    n = self._unheard_at[sid] = self._unheard_at.get(sid, 0) + 1
+                    if n < 2 * cfg.reject_after_listens:
+                        self._emit(Decision.NO_TARGET, f"at the estimate of source #{s.id} ({d:.2f} m), not heard "
+                                   f"in this listen: listen again ({n}/{2 * cfg.reject_after_listens})",
+                                   {"source": s.id})
+                        return True
+                elif self._listen_again(s, f"at the estimate of source #{s.id} ({d:.2f} m), no found cue yet"):
                     return True
-                self._reject(s, f"at its estimate ({d:.2f} m) for {cfg.reject_after_listens} listens without a "
-                                "found cue: a reflection")
+                self._reject(s, f"at its estimate ({d:.2f} m) for {self._close_listens.get(sid, 0)} listens that "
+                                f"heard it without a found cue and {self._unheard_at.get(sid, 0)} that did not hear it:"
+                                " a reflection")
                 continue
             if crit is None:
                 continue
