@@ -119,7 +119,7 @@ def _session_options_cost(seconds: float, repeats: int) -> dict:
     """onnxruntime settings for the 8 kHz model, 4 streams batched, one frame per call (raw session runs)."""
     import onnxruntime as ort
 
-    from robot.vad import MODEL_PATH
+    from robot.vad import load_model
     variants = {"threads 1, sequential, all optimisations": {},
                 "no graph optimisation": {"graph_optimization_level": ort.GraphOptimizationLevel.ORT_DISABLE_ALL},
                 "basic graph optimisation": {"graph_optimization_level": ort.GraphOptimizationLevel.ORT_ENABLE_BASIC},
@@ -133,7 +133,7 @@ def _session_options_cost(seconds: float, repeats: int) -> dict:
         so.execution_mode = ort.ExecutionMode.ORT_SEQUENTIAL
         for k, v in opts.items():
             setattr(so, k, v)
-        sess = ort.InferenceSession(str(MODEL_PATH), so, providers=["CPUExecutionProvider"])
+        sess = ort.InferenceSession(load_model(), so, providers=["CPUExecutionProvider"])
 
         def run() -> None:
             state, sr = np.zeros((2, 4, 128), np.float32), np.array(8000, np.int64)
