@@ -179,9 +179,10 @@ class _FakeSD(types.SimpleNamespace):
     class PortAudioError(Exception):
         pass
 
-    def __init__(self, streams, names=("USB Camera-B4.09.24.1", "USB Camera-B4.09.24.1"), pace=0.0):
+    def __init__(self, streams, names=("USB Camera-B4.09.24.1", "USB Camera-B4.09.24.1"), pace=0.0, lag=(0.0, 0.0)):
         super().__init__()
         self.pace = pace  # wall seconds per second of audio delivered (0: all at once)
+        self.lag = lag    # per device: wall seconds before its stream delivers anything
         self._data = streams
         self._names = names
         self.opened = []
@@ -210,6 +211,7 @@ class _FakeSD(types.SimpleNamespace):
                 self_.stopped = False
 
                 def run():
+                    time.sleep(sd.lag[device - 1])
                     for i in range(0, len(data), blocksize):
                         if self_.stopped:
                             break
@@ -254,6 +256,17 @@ def test_array_capture_calibrates_and_streams_aligned_blocks():
         cap.read(16)
     cap.close()
     assert sd.opened == []
+
+
+def test_calibration_when_one_device_delivers_far_ahead_of_the_other():
+    # Device A hands over all 3 s at once, device B starts late and paced: A's audio behind the output cursor
+    # must be kept for the offset estimate (trimming it against A's own newest audio failed under CPU load).
+    truth = 0.3 * _plane_wave(_unit(-150, 25), 3 * FS, seed=21) / 4
+    sd = _FakeSD(_devices(truth, 811), pace=0.05, lag=(0.0, 0.2))
+    cap = ArrayCapture((1, 2), FS, positions=G.positions, blocksize=512, track_every_s=None, backend=sd)
+    est = cap.calibrate(seconds=1.0)
+    assert est.confident and est.offset == 811
+    cap.close()
 
 
 def test_array_capture_errors_are_clear(monkeypatch):

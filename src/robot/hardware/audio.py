@@ -275,9 +275,12 @@ class ChannelMerger:
 
     def _trim(self) -> None:
         keep = int(self.config.history_s * self.fs)
+        # History is kept behind the newest audio BOTH devices have (device-0 index): a device that runs ahead
+        # (e.g. delivered a burst) must not drop the span the lagging one needs for the offset estimate.
+        common_end = min(self._end(0), self._end(1) - self.offset)
         for d in (0, 1):
-            pos = self._cursor + (self.offset if d else 0)
-            cut = min(pos, self._end(d) - keep) - self._start[d]
+            shift = self.offset if d else 0
+            cut = min(self._cursor + shift, common_end + shift - keep) - self._start[d]
             if cut > 0:
                 self._buf[d] = self._buf[d][:, cut:]
                 self._start[d] += cut
