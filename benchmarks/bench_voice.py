@@ -3,7 +3,7 @@
 Per category: the share of labelled 1 s chunks (hop 0.5 s) called speech (recall for speech,
 false-alarm rate for the rest), then precision/recall over all categories; for Silero VAD
 (onnxruntime, the chosen one), WebRTC VAD (webrtcvad-wheels, modes 2 and 3) and the old
-hand-made score ``robot.voice.voice_likeness``. A chunk is called speech when its statistic (the
+hand-made score ``benchmarks/old_voice_score.py's voice_likeness``. A chunk is called speech when its statistic (the
 fraction of speech frames for a frame-wise VAD, the score for the old one) reaches a threshold
 chosen per detector on the DEV part (best recall minus false-alarm rate), so each gets its fairest rule.
 Then the CPU cost per second of audio (one core, process time, min and median of 5 runs) of Silero
@@ -29,7 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 import numpy as np  # noqa: E402
 
 from robot.vad import SileroVad, speech_fraction  # noqa: E402
-from robot.voice import voice_likeness  # noqa: E402
+from old_voice_score import voice_likeness  # noqa: E402  (the hand-made score the VAD replaced)
 from sound_dataset import FS, chunk_starts, recordings  # noqa: E402
 
 THRESHOLDS = np.round(np.arange(0.05, 1.0, 0.05), 2)

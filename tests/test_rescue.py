@@ -447,20 +447,7 @@ def _unit(az):
 
 
 
-# --- robot.voice -------------------------------------------------------------------
-
-def test_voice_likeness_separates_voice_from_noise_hum_and_high_tones():
-    from robot.voice import voice_likeness
-    rng = np.random.default_rng(0)
-    t = np.arange(FS) / FS
-    for f0, seed in ((90, 1), (130, 2), (220, 3)):
-        assert voice_likeness(_voice(FS, seed, f0), FS).score > 0.6
-    assert voice_likeness(rng.standard_normal(FS), FS).score < 0.1                       # white noise
-    assert voice_likeness(np.cumsum(rng.standard_normal(FS)), FS).score < 0.1            # rumble
-    assert voice_likeness(np.sin(2 * np.pi * 100 * t), FS).score < 0.1                   # mains/motor hum
-    assert voice_likeness(np.sin(2 * np.pi * 2000 * t), FS).score < 0.1                 # beeper above the pitch band
-    assert voice_likeness(np.zeros(FS), FS).score == 0.0
-
+# --- beams ---------------------------------------------------------------------
 
 def test_beam_toward_a_plane_wave_recovers_it_and_attenuates_other_directions():
     from ssl_core.beamform import beam_signal as beamform
