@@ -9,7 +9,7 @@ import pytest
 from robot.hal import AudioBlock, AudioSource, DriveStatus, ManualClock
 from robot.odometry import Odometry
 from robot.replay import DryRunDrive
-from robot.rescue import Decision, RescueBehaviour, RescueConfig, RescueEvent, RescueState
+from robot.rescue import Decision, RescueBehaviour, RescueConfig, RescueEvent
 from robot.sound_map import SourceClass, SourceState
 from ssl_core.geometry import cube8
 from sound_dataset import recordings

@@ -183,7 +183,6 @@ class MpdrBeamformer:
         self._forget = float(np.exp(-StftStream.HOP / fs / memory_s))
         self._update_frames = max(1, int(round(update_s * fs / StftStream.HOP)))
         self._cos_tolerance = float(np.cos(steer_tolerance_rad))
-        m = len(self.positions)
         self._cov: np.ndarray | None = None   # (bins, m, m), in the spectra's precision (first process)
         self._weight = 0.0       # total weight in _cov (bias correction while it fills)
         self._inv = None         # loaded inverse covariance (bins, m, m)

@@ -103,19 +103,6 @@ def early_rir(image_positions: np.ndarray, reflection: np.ndarray, mics: np.ndar
     return sfft.irfft(spec, n_fft, axis=1)[:, :out_len]
 
 
-def fibonacci_sphere(n: int, rng: np.random.Generator | None = None) -> np.ndarray:
-    """``n`` near-uniform unit vectors (n, 3), randomly rotated if ``rng`` is given."""
-    k = np.arange(n) + 0.5
-    z = 1 - 2 * k / n
-    phi = np.pi * (1 + 5**0.5) * k
-    r = np.sqrt(1 - z * z)
-    u = np.stack([r * np.cos(phi), r * np.sin(phi), z], axis=1)
-    if rng is not None:
-        q, _ = np.linalg.qr(rng.standard_normal((3, 3)))
-        u = u @ q.T
-    return u
-
-
 #: Inter-microphone distances are rounded to this (m) before they shape anything: poses of one rigid array
 #: (distances equal to ~1e-15 m) share one geometry key, and a result depends only on the current array,
 #: never on which array was seen first (an earlier 2 mm tolerance reused whatever geometry came first).

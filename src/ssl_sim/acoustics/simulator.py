@@ -319,7 +319,6 @@ class AcousticSimulator:
                  include_sources: bool = True, include_ambient: bool = True) -> np.ndarray:
         """Sound pressure (len(channels), n) in Pa at the microphones for absolute samples ``n0 .. n0+n-1``
         (no sensor effects). ``channels`` selects microphones (default all)."""
-        cfg = self.config
         mics = self._check_mics(mic_positions_world)
         ch = np.arange(mics.shape[0]) if channels is None else np.asarray(channels, int)
         n0, n = int(n0), int(n)
