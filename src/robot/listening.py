@@ -2,8 +2,9 @@
 
 This is the hearing stage of the rescue data path (hearing -> sound map -> planner -> behaviour -> motion)
 fed by per-window detections: each detection of the listen becomes one ``ListenEvidence`` (array frame,
-``track_id`` None) whose ``voice_probability`` is the Silero VAD (``robot.vad``) on a delay-and-sum beam
-toward it (``ssl_core.beamform``). The sound map accumulates these per source over listens, which is what a
+``track_id`` None) whose ``voice_probability`` comes from the speech the Silero VAD hears in the beam toward
+it (``robot.hearing.speech_fractions``: the MPDR + noise suppression chain of ``robot.hearing``, each speech
+frame credited to the beam that owns it). The sound map accumulates these per source over listens, which is what a
 tracker + ``robot.hearing.Hearing`` would do per track; a tracker can replace the per-window detections
 without changing the map's interface (``robot.sound_map.BearingEvidence``).
 
@@ -22,7 +23,8 @@ from typing import Any, Protocol, Sequence
 import numpy as np
 
 from robot.hal import AudioBlock, AudioSource, Clock, as_float_audio
-from robot.vad import SileroVad, speech_fraction
+from robot.hearing import VAD_RATE, speech_fractions
+from robot.vad import SileroVad
 from ssl_core.beamform import beam_signal
 from ssl_core.grid import direction_from_angles
 
@@ -99,8 +101,7 @@ class Listener:
 
     def _evidence(self, block: AudioBlock, dets: Sequence[Detection], time: float, min_power: float
                   ) -> tuple[list[ListenEvidence], int, list[str]]:
-        out, ignored = [], []
-        x = None
+        kept, ignored = [], []
         for d in dets:
             power = float(d.power)
             if power < min_power:
@@ -109,21 +110,25 @@ class Listener:
             direction = getattr(d, "direction", None)
             u = np.asarray(direction if direction is not None else direction_from_angles(d.azimuth, d.elevation),
                            float)
+            kept.append((d, u / np.linalg.norm(u)))
+        fracs = np.zeros(len(kept))
+        x = None
+        if self.speech is not None:
+            fracs = np.array([float(self.speech(block.samples, d, u)) for d, u in kept])
+        elif self.mic_positions is not None and kept:
+            if self._vad is None:
+                self._vad = SileroVad(sample_rate=VAD_RATE)
+            x = as_float_audio(block.samples)
+            fracs = speech_fractions(x, self.mic_positions, np.array([u for _, u in kept]), self._vad)
+        out = []
+        for (d, u), frac in zip(kept, fracs):
             level = getattr(d, "level_db", None)
-            frac = 0.0
-            if self.speech is not None:
-                frac = float(self.speech(block.samples, d, u))
-            elif self.mic_positions is not None:
-                x = as_float_audio(block.samples) if x is None else x
-                beam = beam_signal(x, self.mic_positions, u, self.audio.sample_rate)
-                if self._vad is None:
-                    self._vad = SileroVad()
-                frac = speech_fraction(self._vad.probabilities(beam, self.audio.sample_rate))
-                if level is None:
-                    level = 10 * math.log10(max(float(np.mean(beam**2)), 1e-20))
+            if level is None and x is not None:
+                level = 10 * math.log10(max(float(np.mean(beam_signal(x, self.mic_positions, u,
+                                                                      self.audio.sample_rate)**2)), 1e-20))
             if level is None:
-                level = 10 * math.log10(max(power, 1e-20))
+                level = 10 * math.log10(max(float(d.power), 1e-20))
             p = VOICE_P if frac >= self.voice_threshold else NON_VOICE_P
-            out.append(ListenEvidence(None, u / np.linalg.norm(u), float(time), p, float(level),
-                                      1.0, frac))   # detected in this listen: sounding
+            out.append(ListenEvidence(None, u, float(time), p, float(level),
+                                      1.0, float(frac)))   # detected in this listen: sounding
         return out, len(dets), ignored
