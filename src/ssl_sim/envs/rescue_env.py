@@ -21,9 +21,9 @@ axes, azimuth CCW from forward, elevation up from horizontal):
   scale to [0, 1]; rows past the number of detections are zero.
 - ``detection_mask`` (K,) int8: 1 where the row is a detection.
 - ``detection_voice`` (K,): per detection row, the share (0..1, dimensionless) of the listen window's
-  32 ms frames in which Silero VAD (``robot.vad``, the robot's detector) hears speech in the
-  delay-and-sum beam toward that detection (array frame), the beam first scaled to robot.hearing's VAD
-  level; 0 for rows past the number of detections. Evidence of one step only: the robot's per-track
+  32 ms frames in which Silero VAD (``robot.vad``, the robot's detector) hears speech in the beam
+  toward that detection (array frame) and credits it to that beam (``robot.hearing.speech_fractions``,
+  as the rescue behaviour's listener does); 0 for rows past the number of detections. Evidence of one step only: the robot's per-track
   accumulated P(voice) (``robot.hearing``) needs tracks, which this per-step observation does not keep.
 - ``odometry`` (3,): wheel-encoder dead reckoning over the step, ``(dx, dy, dyaw)`` in m, m, rad
   in the robot frame at the start of the step (clipped to +-1 m, +-pi).
@@ -58,11 +58,10 @@ import gymnasium as gym
 import numpy as np
 from gymnasium import spaces
 
-from robot.hearing import HearingConfig
+from robot.hearing import VAD_RATE, speech_fractions
 from robot.kinematics import forward_kinematics, integrate_pose, twist_to_wheels
 from robot.odometry import Odometry, wrap_angle
-from robot.vad import SileroVad, speech_fraction
-from ssl_core.beamform import FULL_SCALE_SINE_MS, beam_signal
+from robot.vad import SileroVad
 from ssl_core.localizer import Localizer, LocalizerConfig
 from ssl_sim.acoustics import AcousticConfig, AcousticSimulator, AmbientNoise
 from ssl_sim.backends import SimAudioSource
@@ -115,25 +114,13 @@ _VADS: list[SileroVad] = []   # one Silero session per process (loading it costs
 
 
 def detection_voice(samples: np.ndarray, positions: np.ndarray, directions: np.ndarray) -> np.ndarray:
-    """Share (0..1) of 32 ms frames in which Silero VAD hears speech in the far-field delay-and-sum beam
-    of ``samples`` (n_mics, n) (int16 or float full scale 1, 16 kHz) toward each unit direction of
-    ``directions`` (k, 3) (array frame; ``positions`` (n_mics, 3) m) -> (k,).
-
-    Each beam is scaled to robot.hearing's VAD level (``HearingConfig.vad_level_db`` re a full-scale sine,
-    gain at most ``max_gain_db``): Silero misses quiet speech (robot.hearing's docstring)."""
+    """Share (0..1) of 32 ms frames in which Silero VAD hears speech owned by the beam of ``samples``
+    (n_mics, n) (int16 or float full scale 1, 16 kHz) toward each unit direction of ``directions`` (k, 3)
+    (array frame; ``positions`` (n_mics, 3) m) -> (k,) float32: the robot's one-listen voice evidence
+    (``robot.hearing.speech_fractions``: MPDR beams, noise suppression, speech credited to one beam)."""
     if not _VADS:
-        _VADS.append(SileroVad())
-    x = np.asarray(samples)
-    x = x / 32768.0 if x.dtype == np.int16 else x.astype(float)
-    hc = HearingConfig()
-    beams = []
-    for u in np.asarray(directions, float).reshape(-1, 3):
-        beam = beam_signal(x, positions, u, FS)
-        ms = max(float(np.mean(beam**2)), 1e-30)
-        beams.append(beam * 10 ** (min(hc.vad_level_db - 10 * math.log10(ms / FULL_SCALE_SINE_MS), hc.max_gain_db) / 20))
-    vad = _VADS[0]
-    probs = vad.process([vad.new_stream() for _ in beams], beams)   # all beams in one batch per frame
-    return np.array([speech_fraction(p) for p in probs], np.float32)
+        _VADS.append(SileroVad(sample_rate=VAD_RATE))
+    return speech_fractions(samples, positions, directions, _VADS[0]).astype(np.float32)
 
 
 def _localizer(cfg: LocalizerConfig) -> Localizer:
