@@ -167,7 +167,7 @@ class MapSource:
     @property
     def triangulated(self) -> bool:
         """Heard from poses at least 0.3 m apart (the range comes from geometry, not only the height prior)."""
-        return self.baseline_m >= 0.3
+        return self.baseline_m >= TRIANGULATED_BASELINE_M
 
     @property
     def horizontal_sigma_m(self) -> float:
@@ -191,6 +191,15 @@ class _Source:
 
 
 # ----------------------------------------------------------------------------- geometry
+TRIANGULATED_BASELINE_M = 0.3   # listening poses this far apart give a source a range of its own
+
+
+def _baseline(rays: Sequence[Listen]) -> float:
+    """Largest horizontal distance (m) between two listening positions of ``rays``."""
+    org = np.array([r.origin[:2] for r in rays]).reshape(-1, 2)
+    return float(np.max(np.linalg.norm(org[:, None] - org[None], axis=-1))) if len(org) > 1 else 0.0
+
+
 def _angles(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
     rho = np.hypot(v[..., 0], v[..., 1])
     return np.arctan2(v[..., 1], v[..., 0]), np.arctan2(v[..., 2], rho)
@@ -448,13 +457,35 @@ class SoundMap:
                                                  math.radians(cfg.elevation_sigma_deg) ** 2])
         return float(r @ np.linalg.solve(s, r))
 
+    def _along_ray(self, src: _Source, origin: np.ndarray, d: np.ndarray) -> float:
+        """Chi-square of the best agreement of ray (``origin``, ``d``) with a source heard from one place only:
+        the source lies somewhere along its mean ray between ``min_range_m`` and ``max_range_m`` (its range is
+        unknown), so the new ray must point at some point of that segment. The linearised gate of
+        ``_mahalanobis`` fails here: its point estimate sits at the height prior's range, often < 1 m out, and
+        its range spread reaches the robot itself, from which any bearing fits (measured, light_rubble_three
+        seed 7: a caller's ray from 0.1 m beside a ray toward another caller 62 deg away was taken, and the two
+        triangulated into a ghost between them)."""
+        cfg = self.config
+        o = np.array([r.origin for r in src.rays]).mean(axis=0)
+        u = np.array([r.direction for r in src.rays]).sum(axis=0)
+        u /= max(float(np.linalg.norm(u)), 1e-12)
+        ranges = np.geomspace(cfg.min_range_m, cfg.max_range_m, 64)
+        v = o[None] + ranges[:, None] * u[None] - origin[None]
+        az, el = _angles(v)
+        az_m, el_m = _angles(d[None])
+        inflate = 1.0 + 1.0 / len(src.rays)   # the mean ray's own noise
+        chi2 = (_wrap(az - az_m) ** 2 / math.radians(cfg.bearing_sigma_deg) ** 2
+                + (el - el_m) ** 2 / math.radians(cfg.elevation_sigma_deg) ** 2) / inflate
+        return float(chi2.min())
+
     def _associate(self, ev: BearingEvidence, origin: np.ndarray, d: np.ndarray, taken: set[int]) -> int | None:
         cfg = self.config
         scores = []
         for s in self._sources:
             if s.id in taken:
                 continue
-            m = self._mahalanobis(s, origin, d)
+            m = self._mahalanobis(s, origin, d) if _baseline(s.rays) >= TRIANGULATED_BASELINE_M \
+                else self._along_ray(s, origin, d)
             if m <= cfg.gate_chi2:
                 scores.append((m, s.id))
         if not scores:
@@ -535,8 +566,7 @@ class SoundMap:
         else:
             cls = SourceClass.UNKNOWN
         times = [r.time for r in s.rays]
-        org = np.array([r.origin[:2] for r in inl]).reshape(-1, 2)
-        baseline = float(np.max(np.linalg.norm(org[:, None] - org[None], axis=-1))) if len(org) > 1 else 0.0
+        baseline = _baseline(inl)
         return MapSource(s.id, s.position.copy(), s.covariance.copy(), pv, cls, s.state, len(s.rays), len(inl),
                          min(times, default=s.found_time or 0.0), max(times, default=s.found_time or 0.0),
                          s.rays[-1].level_db if s.rays else -math.inf, s.max_level_db, tuple(s.rays), s.found_time,
