@@ -163,11 +163,17 @@ class MapSource:
     history: tuple[Listen, ...]
     found_time: float | None = None
     baseline_m: float = 0.0        # largest horizontal distance between two listening poses of its inliers
+    crossing_deg: float = 0.0      # largest crossing angle of two inlier bearings from different poses
+    min_crossing_deg: float = 15.0  # the map's min_pair_angle_deg
 
     @property
     def triangulated(self) -> bool:
-        """Heard from poses at least 0.3 m apart (the range comes from geometry, not only the height prior)."""
-        return self.baseline_m >= TRIANGULATED_BASELINE_M
+        """Its range comes from geometry, not only from the height prior: two inlier bearings from different
+        poses cross at ``min_pair_angle_deg`` or more (15 deg: 3 bearing sigmas). A baseline alone is not
+        enough: 0.3 m seen from a caller 4 m away subtends 4 deg, less than the bearing noise (measured, light
+        rubble seed 0: bearings toward the far caller from around the start, their range from the elevation
+        and height prior at ~1 m, declared "at the estimate" and waited on for 10-16 s each, three times)."""
+        return self.crossing_deg >= self.min_crossing_deg
 
     @property
     def horizontal_sigma_m(self) -> float:
@@ -191,13 +197,25 @@ class _Source:
 
 
 # ----------------------------------------------------------------------------- geometry
-TRIANGULATED_BASELINE_M = 0.3   # listening poses this far apart give a source a range of its own
+DISTINCT_POSES_M = 0.15   # two listens at least this far apart (horizontally) are from different poses
 
 
 def _baseline(rays: Sequence[Listen]) -> float:
     """Largest horizontal distance (m) between two listening positions of ``rays``."""
     org = np.array([r.origin[:2] for r in rays]).reshape(-1, 2)
     return float(np.max(np.linalg.norm(org[:, None] - org[None], axis=-1))) if len(org) > 1 else 0.0
+
+
+def _crossing_deg(rays: Sequence[Listen]) -> float:
+    """Largest angle (deg) between the horizontal directions of two of ``rays`` heard from different poses
+    (origins >= ``DISTINCT_POSES_M`` apart): how well their bearings cross, i.e. fix the range."""
+    if len(rays) < 2:
+        return 0.0
+    org = np.array([r.origin[:2] for r in rays])
+    az = np.array([math.atan2(r.direction[1], r.direction[0]) for r in rays])
+    apart = np.linalg.norm(org[:, None] - org[None], axis=-1) >= DISTINCT_POSES_M
+    cross = np.abs(_wrap(az[:, None] - az[None]))
+    return float(np.degrees(np.max(np.where(apart, cross, 0.0))))
 
 
 def _angles(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -484,7 +502,7 @@ class SoundMap:
         for s in self._sources:
             if s.id in taken:
                 continue
-            m = self._mahalanobis(s, origin, d) if _baseline(s.rays) >= TRIANGULATED_BASELINE_M \
+            m = self._mahalanobis(s, origin, d) if _crossing_deg(s.rays) >= cfg.min_pair_angle_deg \
                 else self._along_ray(s, origin, d)
             if m <= cfg.gate_chi2:
                 scores.append((m, s.id))
@@ -570,4 +588,4 @@ class SoundMap:
         return MapSource(s.id, s.position.copy(), s.covariance.copy(), pv, cls, s.state, len(s.rays), len(inl),
                          min(times, default=s.found_time or 0.0), max(times, default=s.found_time or 0.0),
                          s.rays[-1].level_db if s.rays else -math.inf, s.max_level_db, tuple(s.rays), s.found_time,
-                         baseline)
+                         baseline, _crossing_deg(inl), cfg.min_pair_angle_deg)
