@@ -184,7 +184,7 @@ class RescueRun:
             raise ValueError(f"localizer.fs = {sc.localizer.fs} Hz differs from the simulated audio "
                              f"({acoustics.config.fs} Hz)")
         self.audio = SimAudioSource(robot, acoustics, on_block=self._on_block)
-        self.drive = SimDriveBase(robot)
+        self.drive = SimDriveBase(robot, seed=sc.seed)   # the run's seed draws the gyro's noise and drift
         self.clock = _TracingClock(robot, self._on_tick)
         localizer = Localizer(cube8(), sc.localizer)
         self.localizer = _RecordingLocalizer(localizer, self._on_result)

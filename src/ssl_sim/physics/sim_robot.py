@@ -6,6 +6,8 @@ wheel encoders, IMU, microphone positions (world frame) and collisions.
 """
 from __future__ import annotations
 
+import math
+from collections import deque
 from dataclasses import dataclass
 
 import mujoco
@@ -110,7 +112,9 @@ class SimRobot:
                         for i in range(m.nsensor)}
         self._stale = False
         self._requested = 0.0  # simulated time asked for through step(), s
+        self._base_qpos = int(m.jnt_qposadr[m.joint("base_free").id])
         mujoco.mj_forward(self.model, self.data)
+        self._restart_yaw_log()
 
     # -- set-up ------------------------------------------------------------------------------
     def _subtree(self, root: int) -> np.ndarray:
@@ -143,6 +147,7 @@ class SimRobot:
         mujoco.mj_forward(self.model, self.data)
         self._stale = False
         self._requested = 0.0
+        self._restart_yaw_log()
 
     # -- commands -------------------------------------------------------------------------------
     def set_wheel_speeds(self, wheel_speeds) -> np.ndarray:
@@ -182,6 +187,7 @@ class SimRobot:
         self._requested = float(d.time)
         mujoco.mj_forward(m, d)
         self._stale = False
+        self._restart_yaw_log()
 
     # -- physics -----------------------------------------------------------------------------------
     def step(self, duration: float | None = None) -> None:
@@ -201,9 +207,11 @@ class SimRobot:
             return
         if self.park_settled and self._settled():
             self.data.time += n * self.timestep  # parked: the state stays as it is (see __init__)
+            self._log_yaw()
             return
         before = self.data.warning.number[_FATAL_INDEX]
         mujoco.mj_step(self.model, self.data, nstep=n)
+        self._log_yaw()
         # mj_step leaves positions, sensors and contacts one step behind the state; refresh on first read.
         self._stale = True
         after = self.data.warning.number[_FATAL_INDEX]
@@ -221,6 +229,41 @@ class SimRobot:
         v = self.data.qvel[self._base_dof: self._base_dof + 6]
         return bool(np.linalg.norm(v[:3]) < 2e-3 and np.linalg.norm(v[3:]) < 1e-2
                     and np.max(np.abs(self.data.qvel[self._wheel_dof])) < 5e-2)
+
+    # -- yaw history (what a gyro averaging over a window sees) ------------------------------------
+    def _qpos_yaw(self) -> float:
+        w, x, y, z = self.data.qpos[self._base_qpos + 3: self._base_qpos + 7]   # the state itself, not one step behind
+        return math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+
+    def _restart_yaw_log(self) -> None:
+        self._yaw_raw = self._qpos_yaw()
+        self._yaw_log: deque[tuple[float, float]] = deque([(self.time, self._yaw_raw)], maxlen=256)  # >= 50 ms of single steps
+
+    def _log_yaw(self) -> None:
+        yaw = self._qpos_yaw()
+        unwrapped = self._yaw_log[-1][1] + math.remainder(yaw - self._yaw_raw, 2 * math.pi)
+        self._yaw_raw = yaw
+        self._yaw_log.append((self.time, unwrapped))
+
+    def mean_yaw_rate(self, window: float) -> float:
+        """Mean rate (rad/s, CCW) of the base's yaw over the last ``window`` s: the yaw change since then (linear
+        between the ends of the physics steps taken, which are at most a control tick or an audio chunk long),
+        divided by ``window``. What a gyro's z axis reports averaged over ``window`` while the base is near level
+        (body and world z rates differ by the cosine of the tilt: 0.4 % at 5 deg). Parked physics
+        (``park_settled``) does not turn the base, so a parked robot's rate is 0."""
+        if not window > 0:
+            raise ValueError(f"window: expected > 0 s, got {window}")
+        log = list(self._yaw_log)
+        t_now, yaw_now = log[-1]
+        t0 = t_now - window
+        for i in range(len(log) - 1, 0, -1):
+            (ta, ya), (tb, yb) = log[i - 1], log[i]
+            if ta <= t0:
+                y0 = ya + (yb - ya) * (t0 - ta) / (tb - ta) if tb > ta else yb
+                return (yaw_now - y0) / window
+        # the log does not reach back `window` s (just started or reset): the mean since its start
+        ta, ya = log[0]
+        return (yaw_now - ya) / (t_now - ta) if t_now > ta else 0.0
 
     def warning_counts(self) -> dict[str, int]:
         """MuJoCo's cumulative counters of the warnings that invalidate a run."""
