@@ -54,8 +54,10 @@ class GyroFusionConfig:
 
     max_gyro_dt_s: float = 0.15        # longer gaps between readings: wheels only (control loop runs at 0.05 s)
     gyro_window_s: float = 0.05        # the drive's gyro rate is the mean over this window (firmware ENC_WINDOW_MS)
-    slip_rate: float = 0.15            # rad/s of wheel-vs-gyro disagreement that means slip (~6x the gyro's
-    #                                    sampling error while turning at 1.2 rad/s, measured in light rubble)
+    slip_rate: float = 0.15            # rad/s of wheel-vs-gyro disagreement that means slip. Measured in light
+    #                                    rubble (seeds 0-3, 200 s): the gyro's error per reading <= 0.001 rad/s, the
+    #                                    gripping wheels' 90th percentile 0.02; all 189 intervals above 0.15 were true
+    #                                    slips (wheels vs truth > 0.1 rad/s), none over 0.15 true slip was missed
     still_wheel_speed: float = 0.05    # rad/s: wheels slower than this stand (a parked robot's wheels jitter at
     #                                    0.03 rad/s, 90th percentile, measured in light rubble: SimRobot._settled)
     still_wheel_angle: float = 0.01    # rad of encoder travel since the previous reading that still counts as
