@@ -4,7 +4,7 @@ import pytest
 
 from robot.hal import DriveStatus, WheelOdometry
 from robot.kinematics import OmniDriveParams, inverse_kinematics
-from robot.odometry import Odometry, wrap_angle
+from robot.odometry import GyroFusionConfig, Odometry, wrap_angle
 
 P = OmniDriveParams()
 
@@ -128,18 +128,18 @@ def test_gyro_rejects_wheel_slip_heading_and_travel():
 
 
 def test_gyro_bias_learnt_standing_still_then_integrated_out_while_slipping():
-    """A 0.5 deg/s gyro bias with 0.02 deg/s noise (seeded): learnt from 2 s of standstill readings
-    (zero-velocity update); a slipping spin afterwards (wheels say +0.8 rad/s, the base truly turns 0.2 rad/s for
-    5 s) integrates the gyro without the bias. Readings while driving do not teach the bias: a later drive with
-    the wheels disagreeing leaves it."""
-    bias, noise = np.radians(0.5), np.radians(0.02)
+    """A 0.5 deg/s gyro bias, standstill readings with the spread the filter expects (seeded): learnt from 2 s of
+    them (zero-velocity update); a slipping spin afterwards (wheels say +0.8 rad/s, the base truly turns 0.2 rad/s
+    for 5 s) integrates the gyro without the bias. Readings while driving do not teach the bias: a later drive
+    with the wheels disagreeing leaves it."""
+    bias, noise = np.radians(0.5), GyroFusionConfig().rate_noise
     rng = np.random.default_rng(1)
     odo = Odometry(P)
     still, _ = _true_rate_readings([(0, 0, 0.0)] * 40, [(0, 0, 0.0)] * 40)
     for r in still:
         odo.update(r, bias + noise * rng.normal(), stationary=True)
     assert odo.bias_updates == 40
-    # 40 readings of 0.02 deg/s noise: the mean is within 3 sigma / sqrt(40)
+    # 40 readings: the mean is within 3 sigma / sqrt(40) (the prior is 14x wider than the spread)
     assert abs(odo.gyro_bias - bias) < 3 * noise / np.sqrt(40)
     assert odo.gyro_bias_sigma < 1.1 * noise / np.sqrt(40)
     learnt = odo.gyro_bias

@@ -62,11 +62,14 @@ class GyroFusionConfig:
     #                                    0.03 rad/s, 90th percentile, measured in light rubble: SimRobot._settled)
     still_wheel_angle: float = 0.01    # rad of encoder travel since the previous reading that still counts as
     #                                    standing (two counts of a 1200-count encoder)
-    rate_noise: float = math.radians(0.02)   # one standstill reading's noise: the MPU-6050's 0.005 deg/s/sqrt(Hz)
-    #                                    over the 50 ms window (0.016 deg/s) and its 1/65.5 deg/s count
-    bias_sigma0: float = math.radians(0.5)   # prior uncertainty of the bias left by the drive's calibration
+    rate_noise: float = math.radians(0.07)   # one standstill reading's spread about the bias: the MPU-6050's noise
+    #                                    over the 50 ms window is 0.016 deg/s, but the base still rocks on its
+    #                                    contacts after braking: 0.06-0.08 deg/s measured in light rubble, seeds 0-3
+    bias_sigma0: float = math.radians(1.0)   # prior uncertainty of the bias the drive's calibration leaves (the gate
+    #                                    below starts at bias_gate x this: a larger residual needs a larger prior)
     bias_walk: float = math.radians(0.001)   # rad/s/sqrt(s) the bias may drift (thermal; as ssl_sim's model)
-    bias_gate: float = 5.0             # standstill readings further than this many sigma from the estimate: ignored
+    bias_gate: float = 5.0             # standstill readings further than this many sigma from the estimate are
+    #                                    ignored (a knock while standing: up to 0.9 deg/s seen in light rubble)
 
     def __post_init__(self) -> None:
         need(self, self.max_gyro_dt_s > 0, "max_gyro_dt_s", "> 0 s")
