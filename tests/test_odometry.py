@@ -138,17 +138,17 @@ def test_gyro_bias_learnt_standing_still_then_integrated_out_while_slipping():
     still, _ = _true_rate_readings([(0, 0, 0.0)] * 40, [(0, 0, 0.0)] * 40)
     for r in still:
         odo.update(r, bias + noise * rng.normal(), stationary=True)
-    assert odo.bias_updates == 40
-    # 40 readings: the mean is within 3 sigma / sqrt(40) (the prior is 14x wider than the spread)
-    assert abs(odo.gyro_bias - bias) < 3 * noise / np.sqrt(40)
-    assert odo.gyro_bias_sigma < 1.1 * noise / np.sqrt(40)
+    assert odo.bias_updates == 39                    # the first reading after the reference is one window still
+    # 39 readings: the mean is within 3 sigma / sqrt(39) (the prior is 14x wider than the spread)
+    assert abs(odo.gyro_bias - bias) < 3 * noise / np.sqrt(39)
+    assert odo.gyro_bias_sigma < 1.1 * noise / np.sqrt(39)
     learnt = odo.gyro_bias
     slip, slip_rates = _true_rate_readings([(0, 0, 0.2)] * 100, [(0, 0, 0.8)] * 100)
     t0, a0 = still[-1].timestamp, still[-1].wheel_angles
     for r, w in zip(slip[1:], slip_rates[1:]):
         odo.update(WheelOdometry(t0 + r.timestamp, a0 + r.wheel_angles, r.wheel_speeds), w + bias)
-    assert odo.pose[2] == pytest.approx(0.2 * 5.0, abs=5.0 * 3 * noise / np.sqrt(40))
-    assert odo.slip_intervals == 100 and odo.gyro_bias == learnt and odo.bias_updates == 40
+    assert odo.pose[2] == pytest.approx(0.2 * 5.0, abs=5.0 * 3 * noise / np.sqrt(39))
+    assert odo.slip_intervals == 100 and odo.gyro_bias == learnt and odo.bias_updates == 39
 
 
 def test_no_bias_learnt_unless_commanded_and_wheels_stand():
@@ -189,9 +189,9 @@ def test_gyro_aided_odometry_against_mujoco_truth_in_light_rubble(seed):
 
 
 def test_sim_drive_reports_the_gyro_yaw_rate():
-    """SimDriveBase.status().yaw_rate is what the firmware reports: the mean rate over the last 50 ms (here the
-    true yaw change over each 50 ms step, from MuJoCo's pose), plus the configured bias and the MPU-6050's
-    noise averaged over the window, in whole counts of 1/65.5 deg/s (seeded)."""
+    """SimDriveBase.status().yaw_rate is what the firmware reports: the mean rate over its last completed 50 ms
+    window (windows end at gyro_phase + k 50 ms; truth here from MuJoCo's pose every 5 ms), plus the configured
+    bias and the MPU-6050's noise averaged over the window, in whole counts of 1/65.5 deg/s (seeded)."""
     import math
 
     from robot.protocol import GYRO_COUNTS_PER_RAD_S
@@ -200,15 +200,25 @@ def test_sim_drive_reports_the_gyro_yaw_rate():
     robot = SimRobot()
     drive = SimDriveBase(robot, gyro_bias=math.radians(0.1), gyro_bias_walk=0.0, seed=3)
     assert drive.gyro_sigma == pytest.approx(math.radians(0.005) / math.sqrt(2 * 0.05))   # 0.016 deg/s
+    assert 0 <= drive.gyro_phase < 0.05
     drive.set_twist(0.0, 0.0, 0.8)
-    robot.step(1.0)
+    robot.step(0.95)
+    times, yaws = [robot.time], [robot.pose().yaw]
     rates, truth = [], []
-    yaw = robot.pose().yaw
+    for _ in range(10):                                        # the pose log reaches a window back
+        robot.step(0.005)
+        times.append(robot.time)
+        yaws.append(robot.pose().yaw)
     for _ in range(40):
-        robot.step(0.05)
+        for _ in range(10):
+            robot.step(0.005)
+            times.append(robot.time)
+            yaws.append(robot.pose().yaw)
         rates.append(drive.status().yaw_rate)
-        truth.append(wrap_angle(robot.pose().yaw - yaw) / 0.05)
-        yaw = robot.pose().yaw
+        assert drive.status().yaw_rate == rates[-1]             # the same window until the next one completes
+        end = drive.gyro_phase + math.floor((robot.time - drive.gyro_phase) / 0.05 + 1e-9) * 0.05
+        y0, y1 = np.interp([end - 0.05, end], times, np.unwrap(yaws))
+        truth.append((y1 - y0) / 0.05)
     rates = np.array(rates)
     err = rates - np.array(truth)
     assert abs(np.mean(truth) - 0.8) < 0.05                   # it turns as commanded

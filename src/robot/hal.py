@@ -81,7 +81,7 @@ class DriveStatus:
     stalled: bool = False         # wheels commanded but not turning
     faults: tuple[str, ...] = field(default_factory=tuple)  # e.g. ("watchdog", "overcurrent")
     yaw_rate: float | None = None  # rad/s about the robot's +z (CCW positive) from a gyro, the mean over the
-    #                                drive's last gyro window (50 ms) ending now; its residual bias is the odometry's
+    #                                drive's last completed gyro window (50 ms); its residual bias is the odometry's
     #                                to learn (robot.odometry); None: no gyro
 
     @property

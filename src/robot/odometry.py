@@ -10,13 +10,14 @@ recovery: one measured recovery added 41 deg of heading error); a rate gyro does
 is its bias integrated over the driving time. So:
 
 * **heading**: between two readings at most ``max_gyro_dt_s`` apart (the control loop's), the gyro's
-  increment: its reported rate (the mean over the drive's last gyro window, 50 ms, ending at the reading:
-  ``robot.hal.DriveStatus.yaw_rate``) minus the bias, times the interval. Over longer gaps (a listen, a
+  increment: its reported rate (the mean over the drive's last gyro window, 50 ms, ending at most a window
+  before the reading: ``robot.hal.DriveStatus.yaw_rate``) minus the bias, times the interval. Over longer gaps (a listen, a
   settle) one rate does not describe what happened in between: the wheels' increment (the robot is
   braking or standing there);
 * **bias**: learnt only while the robot stands, the zero-velocity update: the caller says the drive is
-  commanded to stand (``stationary``), the encoders moved by less than ``still_wheel_angle`` since the
-  previous reading at least one gyro window before, and the wheels turn slower than ``still_wheel_speed``.
+  commanded to stand (``stationary``), the wheels turn slower than ``still_wheel_speed`` and the encoders
+  have moved by less than ``still_wheel_angle`` between readings for at least two gyro windows (the window
+  reported ends up to one window before the reading).
   Then the gyro reads its bias; a scalar Kalman filter (the bias a random walk of ``bias_walk``, each
   reading its noise ``rate_noise``) averages these readings, gating ones beyond ``bias_gate`` sigma (the robot
   bumped while standing). Moving wheels are no reference: their own heading error is what the gyro corrects;
@@ -109,6 +110,7 @@ class Odometry:
         self._last_time: float | None = None
         self._twist = np.zeros(3)
         self._distance = 0.0
+        self._still_since: float | None = None
         self._bias = 0.0
         self._bias_var = self.gyro.bias_sigma0 ** 2
         self._bias_time: float | None = None
@@ -142,8 +144,8 @@ class Odometry:
         return math.sqrt(self._bias_var)
 
     def update(self, reading: WheelOdometry, yaw_rate: float | None = None, stationary: bool = False) -> np.ndarray:
-        """Fold in one encoder reading and, if there is a gyro, its yaw rate (rad/s, CCW: the mean over the gyro
-        window ending at the reading's time); ``stationary``: the drive is commanded to stand (nothing sent
+        """Fold in one encoder reading and, if there is a gyro, its yaw rate (rad/s, CCW: the mean over the gyro's
+        last window); ``stationary``: the drive is commanded to stand (nothing sent
         since it stopped), so a reading whose wheels stand too is a zero-velocity update. Returns the new pose."""
         angles = np.asarray(reading.wheel_angles, dtype=float)
         if angles.shape != (3,):
@@ -158,10 +160,15 @@ class Odometry:
         if self._last_angles is not None:
             step = forward_kinematics(angles - self._last_angles, self.params)  # (dx, dy, dyaw) body frame
             dt = float(reading.timestamp) - self._last_time
-            # the gyro's window lies inside the interval (to a tenth: timestamps fall on physics/clock ticks)
-            standing = (stationary and dt >= 0.9 * self.gyro.gyro_window_s
-                        and float(np.max(np.abs(angles - self._last_angles))) < self.gyro.still_wheel_angle
-                        and float(np.max(np.abs(speeds))) < self.gyro.still_wheel_speed)
+            still = (stationary and float(np.max(np.abs(angles - self._last_angles))) < self.gyro.still_wheel_angle
+                     and float(np.max(np.abs(speeds))) < self.gyro.still_wheel_speed)
+            if not still:
+                self._still_since = None
+            elif self._still_since is None:
+                self._still_since = self._last_time     # the encoders have not moved since the previous reading
+            # The gyro's window ends up to one window before the reading (the firmware's own clock): two windows of
+            # stillness keep the braking out of it (less a tenth: timestamps fall on physics/clock ticks).
+            standing = still and reading.timestamp - self._still_since >= 1.9 * self.gyro.gyro_window_s
             self.slipping = False
             if yaw_rate is not None:
                 if standing:

@@ -35,10 +35,11 @@ class SimDriveBase(DriveBase):
     ``stall_ratio`` of its command for ``stall_time`` s (sampled each time ``status`` is read).
 
     ``yaw_rate``: what the firmware's TELEMETRY ``gyro_z`` reports of an MPU-6050 (firmware/src/gyro.c): the
-    mean z rate over the last ``gyro_window`` s (the firmware averages its 200 Hz samples over the 50 ms
-    encoder window), here the base's true yaw change over that window (``SimRobot.mean_yaw_rate``), plus
+    mean z rate over its last completed ``gyro_window`` (the firmware averages its 200 Hz samples over 50 ms
+    windows on its own clock, so the window reported ends 0-50 ms before the read; its phase here is drawn
+    from ``seed``), the base's true yaw change over that window (``SimRobot.mean_yaw_rate``), plus
     * white noise: ``gyro_noise_density`` (datasheet: 0.005 deg/s/sqrt(Hz), one-sided) averaged over the window
-      leaves sigma = density / sqrt(2 window) = 0.016 deg/s;
+      leaves sigma = density / sqrt(2 window) = 0.016 deg/s, one draw per window (reads within a window agree);
     * a bias: ``gyro_bias`` at the start (rad/s; what is left after the host's standstill calibration: an
       assumption, the datasheet's +-20 deg/s zero-rate offset is before any calibration) that drifts as a random
       walk of ``gyro_bias_walk`` rad/s/sqrt(s) (0.001 deg/s/sqrt(s): over 200 s the bias wanders 0.014 deg/s,
@@ -66,6 +67,8 @@ class SimDriveBase(DriveBase):
         self.gyro_bias_walk = float(gyro_bias_walk)
         self._bias_time = robot.time
         self._rng = np.random.default_rng(seed)
+        self.gyro_phase = float(self._rng.uniform(0.0, self.gyro_window))   # windows end at gyro_phase + k window (s)
+        self._window: tuple[float, float] | None = None                  # (end, reported rate) of the last window
 
     def set_twist(self, vx: float, vy: float, omega: float) -> None:
         if not np.all(np.isfinite([vx, vy, omega])):
@@ -93,8 +96,12 @@ class SimDriveBase(DriveBase):
         if now > self._bias_time:
             self.gyro_bias += self.gyro_bias_walk * math.sqrt(now - self._bias_time) * float(self._rng.normal())
         self._bias_time = now
-        rate = self.robot.mean_yaw_rate(self.gyro_window) + self.gyro_bias + self.gyro_sigma * float(self._rng.normal())
-        yaw_rate = round(rate * GYRO_COUNTS_PER_RAD_S) / GYRO_COUNTS_PER_RAD_S
+        w = self.gyro_window
+        end = self.gyro_phase + math.floor((now - self.gyro_phase) / w + 1e-9) * w   # the last completed window's end
+        if self._window is None or self._window[0] != end:
+            rate = self.robot.mean_yaw_rate(w, end) + self.gyro_bias + self.gyro_sigma * float(self._rng.normal())
+            self._window = (end, round(rate * GYRO_COUNTS_PER_RAD_S) / GYRO_COUNTS_PER_RAD_S)
+        yaw_rate = self._window[1]
         return DriveStatus(bumper=self.robot.bumper(), stalled=stalled, yaw_rate=yaw_rate)
 
     def close(self) -> None:

@@ -245,25 +245,22 @@ class SimRobot:
         self._yaw_raw = yaw
         self._yaw_log.append((self.time, unwrapped))
 
-    def mean_yaw_rate(self, window: float) -> float:
-        """Mean rate (rad/s, CCW) of the base's yaw over the last ``window`` s: the yaw change since then (linear
-        between the ends of the physics steps taken, which are at most a control tick or an audio chunk long),
-        divided by ``window``. What a gyro's z axis reports averaged over ``window`` while the base is near level
-        (body and world z rates differ by the cosine of the tilt: 0.4 % at 5 deg). Parked physics
-        (``park_settled``) does not turn the base, so a parked robot's rate is 0."""
+    def mean_yaw_rate(self, window: float, end: float | None = None) -> float:
+        """Mean rate (rad/s, CCW) of the base's yaw over the ``window`` s that end at ``end`` (default: now; at
+        most ~0.1 s back): the yaw change over it (linear between the ends of the physics steps taken, which
+        are at most a control tick or an audio chunk long) divided by its length. What a gyro's z axis averaged
+        over that window reports while the base is near level (body and world z rates differ by the cosine of
+        the tilt: 0.4 % at 5 deg). Parked physics (``park_settled``) does not turn the base: a parked robot's
+        rate is 0."""
         if not window > 0:
             raise ValueError(f"window: expected > 0 s, got {window}")
-        log = list(self._yaw_log)
-        t_now, yaw_now = log[-1]
-        t0 = t_now - window
-        for i in range(len(log) - 1, 0, -1):
-            (ta, ya), (tb, yb) = log[i - 1], log[i]
-            if ta <= t0:
-                y0 = ya + (yb - ya) * (t0 - ta) / (tb - ta) if tb > ta else yb
-                return (yaw_now - y0) / window
-        # the log does not reach back `window` s (just started or reset): the mean since its start
-        ta, ya = log[0]
-        return (yaw_now - ya) / (t_now - ta) if t_now > ta else 0.0
+        times, yaws = np.array(self._yaw_log).T
+        t1 = times[-1] if end is None else min(float(end), times[-1])
+        t0 = max(t1 - window, times[0])     # the log may not reach back that far (just started or reset)
+        if t1 <= t0:
+            return 0.0
+        y0, y1 = np.interp([t0, t1], times, yaws)
+        return float(y1 - y0) / (t1 - t0)
 
     def warning_counts(self) -> dict[str, int]:
         """MuJoCo's cumulative counters of the warnings that invalidate a run."""
