@@ -11,9 +11,9 @@ is its bias integrated over the driving time. So:
 
 * **heading**: between two readings at most ``max_gyro_dt_s`` apart (the control loop's), the gyro's
   increment: its reported rate (the mean over the drive's last gyro window, 50 ms, ending at most a window
-  before the reading: ``robot.hal.DriveStatus.yaw_rate``) minus the bias, times the interval. Over longer gaps (a listen, a
-  settle) one rate does not describe what happened in between: the wheels' increment (the robot is
-  braking or standing there);
+  before the reading: ``robot.hal.DriveStatus.yaw_rate``) minus the bias, times the interval. Over longer
+  gaps (a listen, a settle) one rate does not describe what happened in between: the wheels' increment
+  (the robot is braking or standing there);
 * **bias**: learnt only while the robot stands, the zero-velocity update: the caller says the drive is
   commanded to stand (``stationary``), the wheels turn slower than ``still_wheel_speed`` and the encoders
   have moved by less than ``still_wheel_angle`` between readings for at least two gyro windows (the window

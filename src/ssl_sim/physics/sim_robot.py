@@ -237,7 +237,8 @@ class SimRobot:
 
     def _restart_yaw_log(self) -> None:
         self._yaw_raw = self._qpos_yaw()
-        self._yaw_log: deque[tuple[float, float]] = deque([(self.time, self._yaw_raw)], maxlen=256)  # >= 50 ms of single steps
+        # (time s, unwrapped yaw rad) at the end of each step() call; 256 cover > 0.1 s even of single steps
+        self._yaw_log: deque[tuple[float, float]] = deque([(self.time, self._yaw_raw)], maxlen=256)
 
     def _log_yaw(self) -> None:
         yaw = self._qpos_yaw()
