@@ -4,7 +4,7 @@ import pytest
 
 from robot.hal import DriveStatus, WheelOdometry
 from robot.kinematics import OmniDriveParams, inverse_kinematics
-from robot.odometry import Odometry, wrap_angle
+from robot.odometry import GyroFusionConfig, Odometry, wrap_angle
 
 P = OmniDriveParams()
 
@@ -127,23 +127,43 @@ def test_gyro_rejects_wheel_slip_heading_and_travel():
     assert abs(wheel_only.pose[2] - 0.8 * n * 0.05) < 1e-6
 
 
-def test_gyro_bias_learnt_while_wheels_grip():
-    """A 0.5 deg/s gyro bias: learnt during 40 s of gripping drive; afterwards a slipping spin (wheels say
-    +0.8 rad/s, the base truly turns 0.2 rad/s) integrates the gyro without the bias."""
-    bias = np.radians(0.5)
-    twists = [(0.1, 0.0, 0.3)] * 400 + [(0.1, 0.0, -0.3)] * 400
-    readings, rates = _true_rate_readings(twists, twists)
+def test_gyro_bias_learnt_standing_still_then_integrated_out_while_slipping():
+    """A 0.5 deg/s gyro bias, standstill readings with the spread the filter expects (seeded): learnt from 2 s of
+    them (zero-velocity update); a slipping spin afterwards (wheels say +0.8 rad/s, the base truly turns 0.2 rad/s
+    for 5 s) integrates the gyro without the bias. Readings while driving do not teach the bias: a later drive
+    with the wheels disagreeing leaves it."""
+    bias, noise = np.radians(0.5), GyroFusionConfig().rate_noise
+    rng = np.random.default_rng(1)
     odo = Odometry(P)
-    for r, w in zip(readings, rates):
-        odo.update(r, w + bias)
-    assert abs(odo.gyro_bias - bias) < 0.1 * bias
-    yaw0 = odo.pose[2]
+    still, _ = _true_rate_readings([(0, 0, 0.0)] * 40, [(0, 0, 0.0)] * 40)
+    for r in still:
+        odo.update(r, bias + noise * rng.normal(), stationary=True)
+    assert odo.bias_updates == 39                    # the first reading after the reference is one window still
+    # 39 readings: the mean is within 3 sigma / sqrt(39) (the prior is 14x wider than the spread)
+    assert abs(odo.gyro_bias - bias) < 3 * noise / np.sqrt(39)
+    assert odo.gyro_bias_sigma < 1.1 * noise / np.sqrt(39)
+    learnt = odo.gyro_bias
     slip, slip_rates = _true_rate_readings([(0, 0, 0.2)] * 100, [(0, 0, 0.8)] * 100)
-    t0, a0 = readings[-1].timestamp, readings[-1].wheel_angles
+    t0, a0 = still[-1].timestamp, still[-1].wheel_angles
     for r, w in zip(slip[1:], slip_rates[1:]):
         odo.update(WheelOdometry(t0 + r.timestamp, a0 + r.wheel_angles, r.wheel_speeds), w + bias)
-    # the one interval from -0.3 to +0.2 rad/s is a trapezoid of a step: up to 0.5 * 0.5 * 0.05 rad off
-    assert abs(odo.pose[2] - yaw0 - 0.2 * 5.0) < 0.0125 + np.radians(0.1)
+    assert odo.pose[2] == pytest.approx(0.2 * 5.0, abs=5.0 * 3 * noise / np.sqrt(39))
+    assert odo.slip_intervals == 100 and odo.gyro_bias == learnt and odo.bias_updates == 39
+
+
+def test_no_bias_learnt_unless_commanded_and_wheels_stand():
+    """Standstill readings teach the bias only when the caller says the drive stands AND the encoders agree."""
+    odo = Odometry(P)
+    still, _ = _true_rate_readings([(0, 0, 0.0)] * 10, [(0, 0, 0.0)] * 10)
+    for r in still:                                  # the drive is not said to stand: no update
+        odo.update(r, 0.01)
+    assert odo.bias_updates == 0 and odo.gyro_bias == 0.0
+    moving, rates = _true_rate_readings([(0.1, 0, 0.3)] * 10, [(0.1, 0, 0.3)] * 10)
+    odo2 = Odometry(P)
+    for r, w in zip(moving, rates):                  # said to stand, but the wheels turn (braking): no update
+        odo2.update(r, w + 0.01, stationary=True)
+    assert odo2.bias_updates == 0 and odo2.gyro_bias == 0.0
+    assert odo2.pose[2] == pytest.approx(0.3 * 0.5 + 0.01 * 0.5, abs=1e-9)   # the gyro's heading, bias and all
 
 
 def test_yaw_rate_must_be_finite():
@@ -153,56 +173,84 @@ def test_yaw_rate_must_be_finite():
 
 
 @pytest.mark.slow
-def test_gyro_aided_odometry_against_mujoco_truth_in_light_rubble():
+@pytest.mark.parametrize("seed", [0, 1])
+def test_gyro_aided_odometry_against_mujoco_truth_in_light_rubble(seed):
     """The rescue behaviour for 200 s in light rubble (bumps, recoveries, a wheel pressing on rubble below the
-    bumper): the behaviour's fused odometry against MuJoCo's true pose, beside wheels alone on the same run."""
-    import math
+    bumper; it keeps exploring after the last find): the behaviour's gyro-aided odometry against MuJoCo's true
+    pose within the issue's 3 deg and 0.3 m. (Wheels alone on the same readings are printed, not asserted: one
+    run in eight of bench_odometry ends with its wheel errors cancelled to 0.1 deg.)"""
+    from ssl_sim.runner import odometry_drift
 
-    from ssl_sim.runner import RescueRun
-    from ssl_sim.scenario import load_scenario
-
-    run = RescueRun(load_scenario("light_rubble_three").with_overrides(seed=0, time_limit_s=200.0))
-    wheels = Odometry(run.robot.params, run.world.robot_start)
-    fused_update = run.behaviour.motion.update_odometry
-
-    def both():
-        wheels.update(run.drive.odometry())
-        return fused_update()
-
-    run.behaviour.motion.update_odometry = both
-    r = run.run()
-    truth = run.robot.pose()
-    fused = run.behaviour.odometry.pose
-    assert r["bumper_recoveries"] >= 1 and run.robot.time >= 150
-    head = abs(math.degrees(wrap_angle(fused[2] - truth.yaw)))
-    pos = math.hypot(fused[0] - truth.x, fused[1] - truth.y)
-    head_w = abs(math.degrees(wrap_angle(wheels.pose[2] - truth.yaw)))
-    pos_w = math.hypot(wheels.pose[0] - truth.x, wheels.pose[1] - truth.y)
-    print(f"fused: heading {head:.2f} deg, position {pos:.3f} m; wheels: {head_w:.2f} deg, {pos_w:.3f} m")
-    # Measured on the final code, seeds 0-3: fused 6.8 / 13.3 / 0.8 / 6.5 deg and 0.19 / 0.35 / 0.10 / 0.27 m;
-    # wheels alone 20 / 16 / 15 / 72 deg and 2.3 / 0.70 / 0.41 / 3.9 m. The issue's target (3 deg, 0.3 m) is not
-    # met on every run: asserted at what this seeded run achieves.
-    assert head <= 8.0 and pos <= 0.4
-    assert head < head_w
+    r = odometry_drift("light_rubble_three", seed=seed, duration_s=200.0)
+    print(r)
+    assert r["sim_time_s"] >= 200.0 and r["bumper_recoveries"] >= 1
+    assert r["bias_updates"] >= 100                          # the bias was learnt standing, listen after listen
+    assert r["heading_error_deg"] <= 3.0 and r["position_error_m"] <= 0.3
 
 
 def test_sim_drive_reports_the_gyro_yaw_rate():
-    """SimDriveBase.status().yaw_rate is the MuJoCo IMU gyro plus the configured bias and noise (seeded)."""
+    """SimDriveBase.status().yaw_rate is what the firmware reports: the mean rate over its last completed 50 ms
+    window (windows end at gyro_phase + k 50 ms; truth here from MuJoCo's pose every 5 ms), plus the configured
+    bias and the MPU-6050's noise averaged over the window, in whole counts of 1/65.5 deg/s (seeded)."""
+    import math
+
+    from robot.protocol import GYRO_COUNTS_PER_RAD_S
+    from ssl_sim.physics import SimDriveBase, SimRobot
+
+    robot = SimRobot()
+    drive = SimDriveBase(robot, gyro_bias=math.radians(0.1), gyro_bias_walk=0.0, seed=3)
+    assert drive.gyro_sigma == pytest.approx(math.radians(0.005) / math.sqrt(2 * 0.05))   # 0.016 deg/s
+    assert 0 <= drive.gyro_phase < 0.05
+    drive.set_twist(0.0, 0.0, 0.8)
+    robot.step(0.95)
+    times, yaws = [robot.time], [robot.pose().yaw]
+    rates, truth = [], []
+    for _ in range(10):                                        # the pose log reaches a window back
+        robot.step(0.005)
+        times.append(robot.time)
+        yaws.append(robot.pose().yaw)
+    for _ in range(40):
+        for _ in range(10):
+            robot.step(0.005)
+            times.append(robot.time)
+            yaws.append(robot.pose().yaw)
+        rates.append(drive.status().yaw_rate)
+        assert drive.status().yaw_rate == rates[-1]             # the same window until the next one completes
+        end = drive.gyro_phase + math.floor((robot.time - drive.gyro_phase) / 0.05 + 1e-9) * 0.05
+        y0, y1 = np.interp([end - 0.05, end], times, np.unwrap(yaws))
+        truth.append((y1 - y0) / 0.05)
+    rates = np.array(rates)
+    err = rates - np.array(truth)
+    assert abs(np.mean(truth) - 0.8) < 0.05                   # it turns as commanded
+    np.testing.assert_allclose(rates * GYRO_COUNTS_PER_RAD_S, np.round(rates * GYRO_COUNTS_PER_RAD_S), atol=1e-9)
+    count = 1 / GYRO_COUNTS_PER_RAD_S
+    sigma = math.hypot(drive.gyro_sigma, count / math.sqrt(12))  # noise and rounding
+    assert abs(err.mean() - math.radians(0.1)) < 3 * sigma / math.sqrt(40) + 1e-6
+    assert err.std() < 2 * sigma
+    assert DriveStatus().yaw_rate is None                       # no gyro: the HAL says so
+
+
+def test_sim_gyro_bias_drifts_as_a_seeded_random_walk():
+    """The simulated bias wanders by gyro_bias_walk * sqrt(t): over 16 seeds and 100 s its change has that spread."""
     import math
 
     from ssl_sim.physics import SimDriveBase, SimRobot
 
     robot = SimRobot()
-    drive = SimDriveBase(robot, gyro_bias=math.radians(0.1), seed=3)
-    drive.set_twist(0.0, 0.0, 0.8)
-    robot.step(1.0)
-    rates, truth = [], []
-    for _ in range(20):
-        robot.step(0.05)
-        rates.append(drive.status().yaw_rate)
-        truth.append(robot.body_twist()[2])
-    err = np.array(rates) - np.array(truth)
-    assert abs(np.mean(truth) - 0.8) < 0.05                   # it turns as commanded
-    assert abs(err.mean() - math.radians(0.1)) < 3 * drive.gyro_sigma / math.sqrt(20) + 1e-3
-    assert err.std() < 3 * drive.gyro_sigma + 1e-3
-    assert DriveStatus().yaw_rate is None                       # no gyro: the HAL says so
+    walk = math.radians(0.001)
+    changes = []
+    for seed in range(16):
+        robot.reset()
+        drive = SimDriveBase(robot, gyro_bias=0.0, gyro_bias_walk=walk, seed=seed)
+        for _ in range(10):
+            robot.place(0.0, 0.0, 0.0, advance_s=10.0)
+            drive.status()
+        changes.append(drive.gyro_bias)
+    robot.reset()
+    again = SimDriveBase(robot, gyro_bias=0.0, gyro_bias_walk=walk, seed=15)
+    for _ in range(10):
+        robot.place(0.0, 0.0, 0.0, advance_s=10.0)
+        again.status()
+    assert again.gyro_bias == changes[-1]                      # seeded
+    # the std of 16 draws of N(0, walk^2 100 s) lies within a factor 2 of walk * 10 (chi distribution, 15 dof)
+    assert 0.5 * walk * 10 < np.std(changes) < 1.6 * walk * 10

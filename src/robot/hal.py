@@ -80,7 +80,9 @@ class DriveStatus:
     bumper: bool = False          # a collision/contact is sensed now
     stalled: bool = False         # wheels commanded but not turning
     faults: tuple[str, ...] = field(default_factory=tuple)  # e.g. ("watchdog", "overcurrent")
-    yaw_rate: float | None = None  # rad/s about the robot's +z (CCW positive) from a gyro; None: no gyro
+    yaw_rate: float | None = None  # rad/s about the robot's +z (CCW positive) from a gyro, the mean over the
+    #                                drive's last completed gyro window (50 ms); its residual bias is the odometry's
+    #                                to learn (robot.odometry); None: no gyro
 
     @property
     def ok(self) -> bool:

@@ -78,8 +78,19 @@ class Motion:
         self.drive, self.clock, self.odometry, self.config, self.fatal = drive, clock, odometry, config, fatal
         self._slips = 0
 
-    def update_odometry(self):
-        return self.odometry.update(self.drive.odometry(), self.drive.status().yaw_rate)
+    def update_odometry(self, stationary: bool = False):
+        """Read encoders and gyro into the odometry; ``stationary``: the drive stands as commanded (every
+        primitive has stopped it), so the odometry may learn the gyro's bias (zero-velocity update)."""
+        return self.odometry.update(self.drive.odometry(), self.drive.status().yaw_rate, stationary)
+
+    def stand(self, seconds: float) -> None:
+        """Stand still (drive stopped) for ``seconds``, reading the odometry every control tick: the braking
+        is tracked and, once the wheels stand, each tick is a zero-velocity update of the gyro's bias."""
+        self.drive.stop()
+        t_end = self.clock.now() + seconds
+        while (left := t_end - self.clock.now()) > 1e-9:
+            self.clock.sleep(min(self.config.control_dt, left))
+            self.update_odometry(stationary=True)
 
     def _check(self, bumper_armed: bool, heading_world: float) -> None:
         st = self.drive.status()

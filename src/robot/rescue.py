@@ -316,8 +316,9 @@ class RescueBehaviour:
 
     def _listen(self) -> list[tuple[ListenEvidence, int]]:
         cfg = self.config
-        res = self.listener.listen(cfg.listen_s, cfg.settle_s, cfg.min_power)
-        self.motion.update_odometry()
+        self.motion.stand(cfg.settle_s)          # settling: odometry tracks the braking, then learns the gyro bias
+        res = self.listener.listen(cfg.listen_s, 0.0, cfg.min_power)
+        self.motion.update_odometry(stationary=True)
         pose = self.pose
         assoc = self.map.update(res.evidence, pose, self.clock.now())
         cands = []

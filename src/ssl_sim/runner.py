@@ -38,7 +38,7 @@ import numpy as np
 from scipy import sparse
 from scipy.sparse.csgraph import dijkstra
 
-from robot.odometry import wrap_angle
+from robot.odometry import Odometry, wrap_angle
 from robot.monitored_audio import MonitoredAudio
 from robot.rescue import Decision, RescueBehaviour, RescueEvent
 from ssl_core.geometry import cube8
@@ -52,7 +52,7 @@ from ssl_sim.scenario import Scenario, load_scenario
 from ssl_sim.viz import NullLogger, RunLogger, make_logger
 from ssl_sim.world import World
 
-__all__ = ["RescueRun", "run_scenario", "write_results", "FreeSpacePaths"]
+__all__ = ["RescueRun", "run_scenario", "write_results", "FreeSpacePaths", "odometry_drift"]
 
 #: A robot contact with a wall or blocking obstacle after this long without one is a new collision (s).
 COLLISION_GAP_S = 0.5
@@ -184,7 +184,7 @@ class RescueRun:
             raise ValueError(f"localizer.fs = {sc.localizer.fs} Hz differs from the simulated audio "
                              f"({acoustics.config.fs} Hz)")
         self.audio = SimAudioSource(robot, acoustics, on_block=self._on_block)
-        self.drive = SimDriveBase(robot)
+        self.drive = SimDriveBase(robot, seed=sc.seed)   # the run's seed draws the gyro's noise and drift
         self.clock = _TracingClock(robot, self._on_tick)
         localizer = Localizer(cube8(), sc.localizer)
         self.localizer = _RecordingLocalizer(localizer, self._on_result)
@@ -527,6 +527,39 @@ def run_scenario(scenario: Scenario | str | Path, seed: int | None = None, *, ti
     finally:
         logger.close()
     return result
+
+
+def odometry_drift(scenario: Scenario | str | Path, seed: int, duration_s: float = 200.0) -> dict[str, Any]:
+    """How far the behaviour's gyro-aided odometry drifts in ``duration_s`` s of a rescue run, against MuJoCo's truth,
+    beside a wheels-only ``Odometry`` fed the same encoder readings. The behaviour runs the whole duration (after the
+    last find it keeps exploring, bumps included); headings in deg, positions in m, rates in deg/s."""
+    sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
+    run = RescueRun(sc.with_overrides(seed=seed, time_limit_s=duration_s))
+    beh = run.behaviour
+    wheels = Odometry(run.robot.params, run.world.robot_start)
+    fused_update = beh.odometry.update
+
+    def both(reading, yaw_rate=None, stationary=False):
+        wheels.update(reading)
+        return fused_update(reading, yaw_rate, stationary)
+
+    beh.odometry.update = both
+    t0 = time.process_time()
+    while run.clock.now() < duration_s and not beh.done:
+        run._handle_events(beh.step())
+    truth = run.robot.pose()
+
+    def errors(pose) -> tuple[float, float]:
+        return abs(_deg(wrap_angle(pose[2] - truth.yaw))), math.hypot(pose[0] - truth.x, pose[1] - truth.y)
+
+    (hf, pf), (hw, pw) = errors(beh.odometry.pose), errors(wheels.pose)   # pf, pw unrounded (m)
+    return {"scenario": sc.name, "seed": seed, "sim_time_s": run.robot.time, "cpu_s": time.process_time() - t0,
+            "bumper_recoveries": sum(1 for e in run.events if e.decision is Decision.RECOVER and e.data.get("bumper")),
+            "n_found": len(run.found), "heading_error_deg": hf, "position_error_m": pf,
+            "wheels_heading_error_deg": hw, "wheels_position_error_m": pw,
+            "gyro_bias_deg_s": round(math.degrees(run.drive.gyro_bias), 4),
+            "gyro_bias_estimate_deg_s": round(math.degrees(beh.odometry.gyro_bias), 4),
+            "bias_updates": beh.odometry.bias_updates, "slip_intervals": beh.odometry.slip_intervals}
 
 
 def format_summary(result: dict) -> str:

@@ -10,6 +10,7 @@ import math
 import numpy as np
 
 from robot.hal import Clock, DriveBase, DriveStatus, WheelOdometry
+from robot.protocol import ENCODER_WINDOW_S, GYRO_COUNTS_PER_RAD_S
 from ssl_sim.physics.sim_robot import SimRobot
 
 
@@ -33,21 +34,41 @@ class SimDriveBase(DriveBase):
     ``stalled``: some wheel commanded at >= ``stall_min_speed`` rad/s has turned at less than
     ``stall_ratio`` of its command for ``stall_time`` s (sampled each time ``status`` is read).
 
-    ``yaw_rate``: the IMU's gyro about the robot's +z (the model's ``imu_gyro`` sensor, which MuJoCo
-    computes noise-free) plus what an MPU-6050-class gyro adds: white noise of ``gyro_noise_density``
-    (datasheet: 0.005 deg/s/sqrt(Hz)) over ``gyro_bandwidth`` Hz (its low-pass filter, 42 Hz setting) and
-    a constant ``gyro_bias`` (rad/s; what a start-up calibration leaves: an assumption, the datasheet's
-    +-20 deg/s zero-rate offset is before calibration). ``seed`` seeds the noise."""
+    ``yaw_rate``: what the firmware's TELEMETRY ``gyro_z`` reports of an MPU-6050 (firmware/src/gyro.c): the
+    mean z rate over its last completed ``gyro_window`` (the firmware averages its 200 Hz samples over 50 ms
+    windows on its own clock, so the window reported ends 0-50 ms before the read; its phase here is drawn
+    from ``seed``), the base's true yaw change over that window (``SimRobot.mean_yaw_rate``), plus
+    * white noise: ``gyro_noise_density`` (datasheet: 0.005 deg/s/sqrt(Hz), one-sided) averaged over the window
+      leaves sigma = density / sqrt(2 window) = 0.016 deg/s, one draw per window (reads within a window agree);
+    * a bias: ``gyro_bias`` at the start (rad/s; what is left after the host's standstill calibration: an
+      assumption, the datasheet's +-20 deg/s zero-rate offset is before any calibration) that drifts as a random
+      walk of ``gyro_bias_walk`` rad/s/sqrt(s) (0.001 deg/s/sqrt(s): over 200 s the bias wanders 0.014 deg/s,
+      an assumption about slow thermal drift; an MPU-6050 at constant temperature measured 0.0012 deg/s bias
+      instability on an Allan plot, robotics.stackexchange.com/q/8860);
+    * the firmware's rounding to whole counts of 1/65.5 deg/s (``robot.protocol.GYRO_COUNTS_PER_RAD_S``).
+    Sensitivity (datasheet: +-3 %) and cross-axis errors are not modelled. ``seed`` seeds noise and drift.
+    ``gyro_bias`` holds the bias now (truth for tests)."""
 
     def __init__(self, robot: SimRobot, stall_min_speed: float = 1.0, stall_ratio: float = 0.25,
                  stall_time: float = 0.3, gyro_noise_density: float = math.radians(0.005),
-                 gyro_bandwidth: float = 42.0, gyro_bias: float = math.radians(0.1), seed: int = 0) -> None:
+                 gyro_window: float = ENCODER_WINDOW_S, gyro_bias: float = math.radians(0.1),
+                 gyro_bias_walk: float = math.radians(0.001), seed: int = 0) -> None:
+        if not gyro_window > 0:
+            raise ValueError(f"gyro_window: expected > 0 s, got {gyro_window}")
+        if not (gyro_noise_density >= 0 and gyro_bias_walk >= 0 and math.isfinite(gyro_bias)):
+            raise ValueError("gyro_noise_density, gyro_bias_walk: expected >= 0; gyro_bias: finite (rad/s), got "
+                             f"{gyro_noise_density}, {gyro_bias_walk}, {gyro_bias}")
         self.robot = robot
         self.stall_min_speed, self.stall_ratio, self.stall_time = stall_min_speed, stall_ratio, stall_time
         self._slow_since: float | None = None
-        self.gyro_sigma = float(gyro_noise_density) * math.sqrt(float(gyro_bandwidth))
+        self.gyro_window = float(gyro_window)
+        self.gyro_sigma = float(gyro_noise_density) / math.sqrt(2.0 * self.gyro_window)
         self.gyro_bias = float(gyro_bias)
+        self.gyro_bias_walk = float(gyro_bias_walk)
+        self._bias_time = robot.time
         self._rng = np.random.default_rng(seed)
+        self.gyro_phase = float(self._rng.uniform(0.0, self.gyro_window))   # windows end at gyro_phase + k window (s)
+        self._window: tuple[float, float] | None = None                  # (end, reported rate) of the last window
 
     def set_twist(self, vx: float, vy: float, omega: float) -> None:
         if not np.all(np.isfinite([vx, vy, omega])):
@@ -72,7 +93,15 @@ class SimDriveBase(DriveBase):
         elif self._slow_since is None:
             self._slow_since = now
         stalled = self._slow_since is not None and now - self._slow_since >= self.stall_time
-        yaw_rate = float(self.robot.imu().gyro[2]) + self.gyro_bias + self.gyro_sigma * float(self._rng.normal())
+        if now > self._bias_time:
+            self.gyro_bias += self.gyro_bias_walk * math.sqrt(now - self._bias_time) * float(self._rng.normal())
+        self._bias_time = now
+        w = self.gyro_window
+        end = self.gyro_phase + math.floor((now - self.gyro_phase) / w + 1e-9) * w   # the last completed window's end
+        if self._window is None or self._window[0] != end:
+            rate = self.robot.mean_yaw_rate(w, end) + self.gyro_bias + self.gyro_sigma * float(self._rng.normal())
+            self._window = (end, round(rate * GYRO_COUNTS_PER_RAD_S) / GYRO_COUNTS_PER_RAD_S)
+        yaw_rate = self._window[1]
         return DriveStatus(bumper=self.robot.bumper(), stalled=stalled, yaw_rate=yaw_rate)
 
     def close(self) -> None:

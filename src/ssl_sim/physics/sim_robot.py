@@ -6,6 +6,8 @@ wheel encoders, IMU, microphone positions (world frame) and collisions.
 """
 from __future__ import annotations
 
+import math
+from collections import deque
 from dataclasses import dataclass
 
 import mujoco
@@ -110,7 +112,9 @@ class SimRobot:
                         for i in range(m.nsensor)}
         self._stale = False
         self._requested = 0.0  # simulated time asked for through step(), s
+        self._base_qpos = int(m.jnt_qposadr[m.joint("base_free").id])
         mujoco.mj_forward(self.model, self.data)
+        self._restart_yaw_log()
 
     # -- set-up ------------------------------------------------------------------------------
     def _subtree(self, root: int) -> np.ndarray:
@@ -143,6 +147,7 @@ class SimRobot:
         mujoco.mj_forward(self.model, self.data)
         self._stale = False
         self._requested = 0.0
+        self._restart_yaw_log()
 
     # -- commands -------------------------------------------------------------------------------
     def set_wheel_speeds(self, wheel_speeds) -> np.ndarray:
@@ -182,6 +187,7 @@ class SimRobot:
         self._requested = float(d.time)
         mujoco.mj_forward(m, d)
         self._stale = False
+        self._restart_yaw_log()
 
     # -- physics -----------------------------------------------------------------------------------
     def step(self, duration: float | None = None) -> None:
@@ -201,9 +207,11 @@ class SimRobot:
             return
         if self.park_settled and self._settled():
             self.data.time += n * self.timestep  # parked: the state stays as it is (see __init__)
+            self._log_yaw()
             return
         before = self.data.warning.number[_FATAL_INDEX]
         mujoco.mj_step(self.model, self.data, nstep=n)
+        self._log_yaw()
         # mj_step leaves positions, sensors and contacts one step behind the state; refresh on first read.
         self._stale = True
         after = self.data.warning.number[_FATAL_INDEX]
@@ -221,6 +229,39 @@ class SimRobot:
         v = self.data.qvel[self._base_dof: self._base_dof + 6]
         return bool(np.linalg.norm(v[:3]) < 2e-3 and np.linalg.norm(v[3:]) < 1e-2
                     and np.max(np.abs(self.data.qvel[self._wheel_dof])) < 5e-2)
+
+    # -- yaw history (what a gyro averaging over a window sees) ------------------------------------
+    def _qpos_yaw(self) -> float:
+        w, x, y, z = self.data.qpos[self._base_qpos + 3: self._base_qpos + 7]   # the state itself, not one step behind
+        return math.atan2(2 * (w * z + x * y), 1 - 2 * (y * y + z * z))
+
+    def _restart_yaw_log(self) -> None:
+        self._yaw_raw = self._qpos_yaw()
+        # (time s, unwrapped yaw rad) at the end of each step() call; 256 cover > 0.1 s even of single steps
+        self._yaw_log: deque[tuple[float, float]] = deque([(self.time, self._yaw_raw)], maxlen=256)
+
+    def _log_yaw(self) -> None:
+        yaw = self._qpos_yaw()
+        unwrapped = self._yaw_log[-1][1] + math.remainder(yaw - self._yaw_raw, 2 * math.pi)
+        self._yaw_raw = yaw
+        self._yaw_log.append((self.time, unwrapped))
+
+    def mean_yaw_rate(self, window: float, end: float | None = None) -> float:
+        """Mean rate (rad/s, CCW) of the base's yaw over the ``window`` s that end at ``end`` (default: now; at
+        most ~0.1 s back): the yaw change over it (linear between the ends of the physics steps taken, which
+        are at most a control tick or an audio chunk long) divided by its length. What a gyro's z axis averaged
+        over that window reports while the base is near level (body and world z rates differ by the cosine of
+        the tilt: 0.4 % at 5 deg). Parked physics (``park_settled``) does not turn the base: a parked robot's
+        rate is 0."""
+        if not window > 0:
+            raise ValueError(f"window: expected > 0 s, got {window}")
+        times, yaws = np.array(self._yaw_log).T
+        t1 = times[-1] if end is None else min(float(end), times[-1])
+        t0 = max(t1 - window, times[0])     # the log may not reach back that far (just started or reset)
+        if t1 <= t0:
+            return 0.0
+        y0, y1 = np.interp([t0, t1], times, yaws)
+        return float(y1 - y0) / (t1 - t0)
 
     def warning_counts(self) -> dict[str, int]:
         """MuJoCo's cumulative counters of the warnings that invalidate a run."""
