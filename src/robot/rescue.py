@@ -12,7 +12,8 @@ One cycle walks the data path, each stage in its own module:
   ``corroborated_elevation_deg`` and its level rose ``level_rise_db`` above the faintest listen of it, or
   (3) the map puts it within ``found_distance_m`` of the robot with a horizontal 1-sigma under
   ``found_sigma_m``, the bearing now points down and the level rose (supporting cues), or (4) the bumper fires while driving at it with its estimate within
-  ``bump_found_range_m`` and ``bump_ahead_deg`` of the motion (a victim under a slab cannot be reached).
+  ``bump_found_range_m`` and ``bump_ahead_deg`` of the motion, heard within ``bump_heard_within_s`` (a victim
+  under a slab cannot be reached).
   The reported position is the map's estimate; a found source stays found in the map (never declared again);
 * **plan** (``robot.planner``): the most useful unfound victim (P(victim), recency, path length; interferers
   never) and a path to it around the obstacles learned by touch (``robot.occupancy``); none mapped ->
@@ -120,6 +121,9 @@ class RescueConfig:
     #                                        triangulates tightly too: measured, 2 false finds in light rubble)
     bump_found_range_m: float = 0.8        # criterion 4: bump while driving at a target estimated this close
     bump_ahead_deg: float = 35.0           # ... and this close to the direction of motion
+    bump_heard_within_s: float = 10.0      # ... and heard this recently (2-3 listen cycles: a caller is heard in most;
+    #                                        a mirror image beyond a wall, unheard for 25 s, was "found" by bumping
+    #                                        into the wall: light_rubble_three seed 6)
     found_exclusion_m: float = 0.8         # a source this close to a found victim is that victim (the runner's
     #                                        success radius is 0.75 m: two victims closer are one find anyway)
     max_contacts_per_target: int = 3       # contacts while pursuing one source before it is set aside a while
@@ -140,7 +144,8 @@ class RescueConfig:
             v = getattr(self, f.name)
             if isinstance(v, float) and not (math.isfinite(v) and v >= 0):
                 raise ValueError(f"RescueConfig.{f.name}: expected a finite number >= 0, got {v}")
-        for name in ("listen_s", "step_m", "min_step_m", "array_height_m", "found_distance_m", "found_sigma_m"):
+        for name in ("listen_s", "step_m", "min_step_m", "array_height_m", "found_distance_m", "found_sigma_m",
+                     "bump_heard_within_s"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"RescueConfig.{name}: expected > 0, got {getattr(self, name)}")
         if not 0 < self.found_elevation_deg < 90 or not 0 < self.corroborated_elevation_deg < 90:
@@ -569,6 +574,7 @@ class RescueBehaviour:
             if d <= cfg.bump_found_range_m and off <= math.radians(cfg.bump_ahead_deg) \
                     and s.state is not SourceState.FOUND and self._approachable(s) and not self._near_found(s) \
                     and s.horizontal_sigma_m <= 2 * cfg.found_sigma_m \
+                    and self.clock.now() - s.last_time <= cfg.bump_heard_within_s \
                     and (s.cls is SourceClass.VICTIM or not self._near_machine(s)):
                 self._declare_found(s, f"bumped into it while approaching (estimate {d:.2f} m ahead, "
                                        f"{math.degrees(off):.0f} deg off the motion)")
