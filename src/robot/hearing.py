@@ -157,7 +157,7 @@ class Hearing:
 
     def update(self, block: np.ndarray, tracks: Sequence[Track], time: float) -> list[TrackEvidence]:
         cfg = self.config
-        x = as_float_audio(block)
+        x = np.asarray(block)
         # The whole chain listens in the first vad_on_s of every vad_period_s (stream time), to all tracks
         # at once; in between it only keeps the last samples, and evidence keeps the last listened values.
         listening = self._samples % self._period < self._on
@@ -168,7 +168,7 @@ class Hearing:
         for gone in set(self._level) - set(ids):
             del self._level[gone]
         if not listening:
-            self._stft.skip(x)
+            self._stft.skip(as_float_audio(x[:, -StftStream.HOP:], np.float32))
             self._gap = True
             return self._evidence(tracks, ids, time)
         if self._gap:   # a new listening burst: the beams fade in, the VAD starts a new frame
@@ -178,9 +178,10 @@ class Hearing:
             self._gap = False
         dt = x.shape[-1] / SAMPLE_RATE
         directions = np.array([np.asarray(t.direction, float) for t in tracks]).reshape(-1, 3)
-        beams = self.beamformer.process(self._stft.analyse(x), directions)        # (k, frames, bins < 4 kHz)
+        beams = self.beamformer.process(self._stft.analyse(as_float_audio(x, np.float32)), directions)
+        power = beams.real**2 + beams.imag**2        # (k, frames, bins < 4 kHz)
         if beams.shape[1]:
-            levels = 10 * np.log10(np.maximum(StftStream.mean_square(beams), 1e-30) / FULL_SCALE_SINE_MS)
+            levels = 10 * np.log10(np.maximum(StftStream.power_mean_square(power), 1e-30) / FULL_SCALE_SINE_MS)
             self._level.update(zip(ids, levels.tolist()))
         if not tracks or not beams.shape[1]:
             return self._evidence(tracks, ids, time)
@@ -190,8 +191,7 @@ class Hearing:
             if i not in self._state:
                 self._state[i] = _TrackState(self.vad.new_stream(), NoiseFloor(memory), OverlapAdd(self._decimation))
             states.append(self._state[i])
-        power = beams.real**2 + beams.imag**2
-        floors = np.stack([st.noise.update(p) for st, p in zip(states, power)])   # (k, bins)
+        floors = np.stack([st.noise.update_mean(m) for st, m in zip(states, power.mean(axis=1))])   # (k, bins)
         weights = states[0].noise.gains(power, floors[:, None])
         # share of each beam's power above its noise floor (an SNR: the talker's own beam, whose MPDR
         # cancels the machine, has more of it than the machine's beam she leaks into)
@@ -199,9 +199,10 @@ class Hearing:
         clean = OverlapAdd.synthesise_all([st.synthesis for st in states],
                                           beams * np.maximum(weights, cfg.noise_min_gain))
         follow = 1 - math.exp(-dt / cfg.level_tau_s)
-        for st, lvl, row in zip(states, level_db(clean, axis=-1).tolist(), clean):
+        for st, lvl in zip(states, level_db(clean, axis=-1).tolist()):
             st.slow_db = lvl if st.slow_db is None else st.slow_db + (lvl - st.slow_db) * follow
-            row *= 10 ** (min(cfg.vad_level_db - st.slow_db, cfg.max_gain_db) / 20)
+        slow_db = np.array([st.slow_db for st in states], clean.dtype)
+        clean *= (10 ** (np.minimum(cfg.vad_level_db - slow_db, cfg.max_gain_db) / 20))[:, None]
         probs = self.vad.process([st.vad for st in states], list(clean))
         # Speech heard in several beams at once goes to the beam in which the largest share of the power
         # stands above its noise floor: a talker leaks into a machine's beam (Silero hears speech far

@@ -27,9 +27,13 @@ import gzip
 from pathlib import Path
 
 import numpy as np
-from scipy import signal
+from scipy import signal, special
 
 MODEL_PATH = Path(__file__).resolve().parent / "models" / "silero_vad_op18_ifless.onnx.gz"
+# The same model's 8 kHz net split by scripts/split_silero_vad.py: its stateless encoder (STFT + convolutions)
+# and its LSTM cell + output layer (the only state), so that all frames of a block share one encoder call.
+SPLIT_8K_ENCODER_PATH = MODEL_PATH.with_name("silero_vad_8k_encoder.onnx.gz")
+SPLIT_8K_LSTM_PATH = MODEL_PATH.with_name("silero_vad_8k_lstm.npz")
 
 
 def load_model(path: Path | str = MODEL_PATH) -> bytes:
@@ -64,17 +68,27 @@ class VadStream:
 
 class SileroVad:
     """Silero VAD on 16 kHz mono streams. One frame = 32 ms; ``process`` returns the speech
-    probability (0..1) of each whole frame completed by the new samples."""
+    probability (0..1) of each whole frame completed by the new samples.
+
+    ``split`` (8 kHz with the shipped model only; default there): the net split at its one state, the
+    encoder of every pending frame of every stream in one onnxruntime call and the LSTM cell stepped in
+    numpy (``SPLIT_8K_*``; the same probabilities within 1e-6). Otherwise one model call per frame."""
 
     frame_s = FRAME / SAMPLE_RATE  # 32 ms at either rate
 
-    def __init__(self, threads: int = 1, model_path: Path | str = MODEL_PATH, sample_rate: int = SAMPLE_RATE) -> None:
+    def __init__(self, threads: int = 1, model_path: Path | str = MODEL_PATH, sample_rate: int = SAMPLE_RATE,
+                 split: bool | None = None) -> None:
         import onnxruntime as ort  # robot's dependency; imported here so ssl_core users never pay for it
 
         if threads < 1:
             raise ValueError(f"threads: expected >= 1, got {threads}")
         if sample_rate not in _FRAMING:
             raise ValueError(f"sample_rate: expected one of {sorted(_FRAMING)} Hz, got {sample_rate}")
+        splittable = sample_rate == 8000 and Path(model_path) == MODEL_PATH
+        if split and not splittable:
+            raise ValueError(f"split: only the shipped model ({MODEL_PATH.name}) at 8000 Hz is split, "
+                             f"got {Path(model_path).name} at {sample_rate} Hz")
+        self.split = splittable if split is None else split
         opts = ort.SessionOptions()
         opts.intra_op_num_threads = threads  # its matrices are tiny: more threads cost CPU, gain nothing
         opts.inter_op_num_threads = 1
@@ -82,7 +96,17 @@ class SileroVad:
         # (no / basic / all graph optimisations, memory pattern on or off, thread spinning on or off:
         # the same cost within 3 %; 2 intra-op threads double it: benchmarks/bench_voice.py)
         opts.log_severity_level = 3
-        self._session = ort.InferenceSession(load_model(model_path), opts, providers=["CPUExecutionProvider"])
+        model = load_model(SPLIT_8K_ENCODER_PATH if self.split else model_path)
+        self._session = ort.InferenceSession(model, opts, providers=["CPUExecutionProvider"])
+        if self.split:
+            # sigmoid(x) = (1 + tanh(x / 2)) / 2: the i, f and o gates' rows halved, so that one tanh serves
+            # all four gates
+            half = np.repeat(np.array([0.5, 0.5, 1.0, 0.5], np.float32), 128)
+            with np.load(SPLIT_8K_LSTM_PATH) as w:
+                self._w_ih_t = (w["weight_ih"] * half[:, None]).T.copy()   # (128, 512)
+                self._w_hh_t = (w["weight_hh"] * half[:, None]).T.copy()
+                self._bias = (w["bias_ih"] + w["bias_hh"]) * half
+                self._out_w, self._out_b = w["out_weight"], float(w["out_bias"])
         self.sample_rate = sample_rate
         self.frame, self._context = _FRAMING[sample_rate]
         self._sr = np.array(sample_rate, dtype=np.int64)
@@ -102,31 +126,55 @@ class SileroVad:
         frame, ctx = self.frame, self._context
         counts = [len(s.pending) // frame for s in streams]
         n = max(counts, default=0)
-        probs = np.zeros((len(streams), n), np.float32)
-        # Model inputs of every frame at once, (frames, streams, context + frame): each frame preceded by
-        # the last samples of the one before. A stream with fewer frames is padded; its padded frames'
-        # outputs and states are discarded.
+        out = []
         if n:
+            # Model inputs of every frame at once, (frames, streams, context + frame): each frame preceded by
+            # the last samples of the one before. A stream with fewer frames is padded; its padded frames'
+            # outputs and states are discarded.
             pending = np.zeros((len(streams), n * frame), np.float32)
             for i, (s, c) in enumerate(zip(streams, counts)):
                 pending[i, :c * frame] = s.pending[:c * frame]
             frames = pending.reshape(len(streams), n, frame)
             contexts = np.concatenate([np.stack([s.context for s in streams])[:, None], frames[:, :-1, -ctx:]], axis=1)
-            inputs = np.ascontiguousarray(np.concatenate([contexts, frames], axis=2).transpose(1, 0, 2))
+            inputs = np.concatenate([contexts, frames], axis=2).transpose(1, 0, 2)
             state = np.concatenate([s.state for s in streams], axis=1)
-            for k in range(n):
-                prob, new_state = self._session.run(None, {"input": inputs[k], "state": state, "sr": self._sr})
-                probs[:, k] = prob[:, 0]
-                for i, s in enumerate(streams):
-                    if counts[i] == k + 1:   # this stream's last whole frame: keep its state and context
-                        s.state, s.context = new_state[:, i:i + 1].copy(), inputs[k, i, -ctx:].copy()
-                state = new_state
-        out = []
-        for i, (s, c) in enumerate(zip(streams, counts)):
+            probs, states = self._run_split(inputs, state) if self.split else self._run(inputs, state)
+            for i, (s, c) in enumerate(zip(streams, counts)):
+                if c:   # the state and context after this stream's last whole frame
+                    s.state, s.context = states[c - 1, :, i:i + 1].copy(), inputs[c - 1, i, -ctx:].copy()
+                out.append(probs[:c, i].astype(float))
+        else:
+            out = [np.zeros(0) for _ in streams]
+        for s, c in zip(streams, counts):
             s.pending = s.pending[c * frame:]
             s.n_frames += c
-            out.append(probs[i, :c].astype(float))
         return out
+
+    def _run(self, inputs: np.ndarray, state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """The whole model frame by frame: ``inputs`` (frames, streams, samples), ``state`` (2, streams, 128)
+        -> probabilities (frames, streams) and the state after each frame (frames, 2, streams, 128)."""
+        probs = np.empty(inputs.shape[:2], np.float32)
+        states = np.empty((len(inputs), *state.shape), np.float32)
+        for k, x in enumerate(inputs):
+            prob, state = self._session.run(None, {"input": np.ascontiguousarray(x), "state": state, "sr": self._sr})
+            probs[k], states[k] = prob[:, 0], state
+        return probs, states
+
+    def _run_split(self, inputs: np.ndarray, state: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
+        """``_run`` with the encoder of all frames in one call and the LSTM cell (torch's LSTMCell: gates i, f,
+        g, o) stepped in numpy."""
+        n, k = inputs.shape[:2]
+        (features,) = self._session.run(None, {"input": inputs.reshape(n * k, -1)})
+        gates_in = (features @ self._w_ih_t + self._bias).reshape(n, k, -1)        # (frames, streams, 4 x 128)
+        h, c = state
+        states = np.empty((n, 2, k, h.shape[-1]), np.float32)
+        for t in range(n):
+            z = np.tanh(gates_in[t] + h @ self._w_hh_t)   # tanh of: i / 2, f / 2, g, o / 2
+            sig = 0.5 * z + 0.5                               # sigmoid(i), sigmoid(f), -, sigmoid(o)
+            c = sig[:, 128:256] * c + sig[:, :128] * z[:, 256:384]
+            h = sig[:, 384:] * np.tanh(c)
+            states[t, 0], states[t, 1] = h, c
+        return special.expit(np.maximum(states[:, 0], 0) @ self._out_w + self._out_b), states
 
     def probabilities(self, x: np.ndarray, fs: int = SAMPLE_RATE) -> np.ndarray:
         """Speech probability per 32 ms frame of one whole mono float signal at ``fs`` Hz (resampled to

@@ -1,0 +1,109 @@
+"""Derive the split 8 kHz Silero VAD that ``robot.vad`` runs: its convolutional encoder as an ONNX model,
+and its LSTM cell and output layer as arrays.
+
+The shipped model (``src/robot/models/silero_vad_op18_ifless.onnx.gz``, unchanged from the silero-vad 6.2.3
+wheel) is per 32 ms frame: STFT and four convolutions (stateless) -> one LSTM cell step (the state) ->
+ReLU, a 1x1 convolution and a sigmoid. Only the LSTM carries state between frames, so the encoder of all
+frames of a block can go through onnxruntime in one call (batch = frames x streams) and the cheap cell be
+stepped frame by frame in numpy (``robot.vad``; tests/test_voice.py checks that both give the model's
+probabilities). This script copies the 8 kHz branch's nodes and weights as they are: no retraining.
+
+    pip install 'onnx>=1.16,<2'   # only for this script
+    python scripts/split_silero_vad.py
+
+Writes ``src/robot/models/silero_vad_8k_encoder.onnx.gz`` (input ``input`` (batch, 288) float32: 32
+samples of context + a 256-sample frame; output ``features`` (batch, 128), the LSTM cell's input) and
+``silero_vad_8k_lstm.npz`` (``weight_ih``, ``weight_hh`` (512, 128), ``bias_ih``, ``bias_hh`` (512,) in
+torch's LSTMCell gate order i, f, g, o; ``out_weight`` (128,), ``out_bias`` ()).
+"""
+from __future__ import annotations
+
+import gzip
+import sys
+from pathlib import Path
+
+import numpy as np
+import onnx
+from onnx import TensorProto, helper, numpy_helper
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "src"))
+from robot.vad import MODEL_PATH, SPLIT_8K_ENCODER_PATH, SPLIT_8K_LSTM_PATH, load_model  # noqa: E402
+
+PREFIX = "model_8k."   # the 8 kHz branch's weights (the 16 kHz one's are "model.")
+
+
+def _eight_khz_branch(model: onnx.ModelProto) -> onnx.GraphProto:
+    """The model branches on ``sr`` (== 16000) in one top-level If node; its else branch is the 8 kHz net."""
+    (node,) = [n for n in model.graph.node if n.op_type == "If"]
+    (branch,) = [a.g for a in node.attribute if a.name == "else_branch"]
+    return branch
+
+
+def _as_2d(nodes: list[onnx.NodeProto], weights: dict[str, onnx.TensorProto],
+           features: str) -> tuple[list[onnx.NodeProto], list[onnx.TensorProto]]:
+    """The encoder's 1-D convolutions as 2-D ones of height 1 (the same arithmetic): onnxruntime runs 2-D
+    convolutions in its blocked NCHWc layout on x86-64 (AVX2 / AVX-512), which measured 1.8x faster here
+    (benchmarks/bench_voice.py). The signal is (batch, channels, 1, time) from the STFT's input on; the
+    encoder's output at time step 0 is renamed ``features`` (batch, 128)."""
+    out, extra = [], [numpy_helper.from_array(np.array([1, 2], np.int64), "axes_channel_height"),
+                      numpy_helper.from_array(np.array([2], np.int64), "axis_height")]
+    (first,) = [n for n in nodes if n.op_type == "Conv"][:1]
+    for n in nodes:
+        n = onnx.NodeProto.FromString(n.SerializeToString())   # a copy
+        if n.op_type == "Unsqueeze" and first.input[0] in n.output:   # (batch, time) -> (batch, 1, 1, time)
+            n.input[1] = "axes_channel_height"
+        elif n.op_type == "Conv":
+            w = numpy_helper.to_array(weights[n.input[1]])
+            extra.append(numpy_helper.from_array(w[:, :, None, :], n.input[1] + ".2d"))
+            n.input[1] += ".2d"
+            for a in n.attribute:
+                if a.name in ("strides", "dilations", "kernel_shape"):
+                    a.ints[:] = [1, *a.ints]
+                elif a.name == "pads":
+                    a.ints[:] = [0, a.ints[0], 0, a.ints[1]]
+        elif features in n.output:             # Gather of time step 0 along axis 2 -> axis 3, then drop height
+            assert n.op_type == "Gather" and n.attribute[0].name == "axis" and n.attribute[0].i == 2, n
+            n.attribute[0].i = 3
+            out.append(n)
+            n = helper.make_node("Squeeze", [features, "axis_height"], ["features"])
+        out.append(n)
+    return out, extra
+
+
+def main() -> None:
+    model = onnx.load_from_string(load_model(MODEL_PATH))
+    branch = _eight_khz_branch(model)
+    weights = {t.name: t for t in model.graph.initializer}
+    lstm = [n for n in branch.node if n.op_type == "Gemm"]
+    (w_ih_gemm,) = [n for n in lstm if n.input[1] == PREFIX + "decoder.rnn.weight_ih"]
+    features = w_ih_gemm.input[0]          # the encoder's last output, time step 0: the cell's input
+    nodes = []
+    for n in branch.node:                  # the nodes up to (and including) the one making `features`
+        nodes.append(n)
+        if features in n.output:
+            break
+    nodes, extra = _as_2d(nodes, weights, features)
+    weights.update({t.name: t for t in extra})
+    used = {i for n in nodes for i in n.input}
+    graph = helper.make_graph(
+        nodes, "silero_vad_8k_encoder",
+        [helper.make_tensor_value_info("input", TensorProto.FLOAT, ["batch", 288])],
+        [helper.make_tensor_value_info("features", TensorProto.FLOAT, ["batch", 128])],
+        initializer=[weights[name] for name in sorted(used & set(weights))])
+    encoder = helper.make_model(graph, opset_imports=model.opset_import, ir_version=model.ir_version,
+                                producer_name="ssl-rescue scripts/split_silero_vad.py")
+    onnx.checker.check_model(encoder)
+    SPLIT_8K_ENCODER_PATH.write_bytes(gzip.compress(encoder.SerializeToString(), mtime=0))
+
+    def w(name: str) -> np.ndarray:
+        return numpy_helper.to_array(weights[PREFIX + name]).astype(np.float32)
+    np.savez_compressed(SPLIT_8K_LSTM_PATH, weight_ih=w("decoder.rnn.weight_ih"), weight_hh=w("decoder.rnn.weight_hh"),
+                        bias_ih=w("decoder.rnn.bias_ih"), bias_hh=w("decoder.rnn.bias_hh"),
+                        out_weight=w("decoder.decoder.2.weight").reshape(128), out_bias=w("decoder.decoder.2.bias").reshape(()))
+    for p in (SPLIT_8K_ENCODER_PATH, SPLIT_8K_LSTM_PATH):
+        print(f"{p.relative_to(ROOT)}: {p.stat().st_size / 1e6:.2f} MB")
+
+
+if __name__ == "__main__":
+    main()
