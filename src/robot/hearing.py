@@ -179,11 +179,13 @@ class Hearing:
         dt = x.shape[-1] / SAMPLE_RATE
         directions = np.array([np.asarray(t.direction, float) for t in tracks]).reshape(-1, 3)
         beams = self.beamformer.process(self._stft.analyse(as_float_audio(x, np.float32)), directions)
+        if not beams.shape[1]:
+            return self._evidence(tracks, ids, time)
         power = beams.real**2 + beams.imag**2        # (k, frames, bins < 4 kHz)
-        if beams.shape[1]:
-            levels = 10 * np.log10(np.maximum(StftStream.power_mean_square(power), 1e-30) / FULL_SCALE_SINE_MS)
-            self._level.update(zip(ids, levels.tolist()))
-        if not tracks or not beams.shape[1]:
+        mean_power = power.mean(axis=1)              # (k, bins)
+        levels = 10 * np.log10(np.maximum(StftStream.power_mean_square(mean_power[:, None]), 1e-30) / FULL_SCALE_SINE_MS)
+        self._level.update(zip(ids, levels.tolist()))
+        if not tracks:
             return self._evidence(tracks, ids, time)
         memory = max(1, int(round(cfg.noise_memory_s / max(dt, StftStream.HOP / SAMPLE_RATE))))
         states = []
@@ -191,11 +193,11 @@ class Hearing:
             if i not in self._state:
                 self._state[i] = _TrackState(self.vad.new_stream(), NoiseFloor(memory), OverlapAdd(self._decimation))
             states.append(self._state[i])
-        floors = np.stack([st.noise.update_mean(m) for st, m in zip(states, power.mean(axis=1))])   # (k, bins)
+        floors = np.stack([st.noise.update_mean(m) for st, m in zip(states, mean_power)])   # (k, bins)
         weights = states[0].noise.gains(power, floors[:, None])
         # share of each beam's power above its noise floor (an SNR: the talker's own beam, whose MPDR
         # cancels the machine, has more of it than the machine's beam she leaks into)
-        excess = (power * weights).sum(axis=(1, 2)) / np.maximum(power.sum(axis=(1, 2)), 1e-30)
+        excess = (power * weights).sum(axis=(1, 2)) / np.maximum(mean_power.sum(axis=1) * power.shape[1], 1e-30)
         clean = OverlapAdd.synthesise_all([st.synthesis for st in states],
                                           beams * np.maximum(weights, cfg.noise_min_gain))
         follow = 1 - math.exp(-dt / cfg.level_tau_s)

@@ -215,16 +215,17 @@ class MpdrBeamformer:
         nb = len(self.freqs)
         if self._cov is None or self._cov.dtype != spec.dtype:
             self._cov, self._weight, self._inv = np.zeros((nb, len(self.positions), len(self.positions)), spec.dtype), 0.0, None
-        if n:
-            # (using every other frame only, which do not overlap, halved this but measurably weakened the
-            # machine's cancellation in the room cases of tests/test_hearing.py)
-            s = np.ascontiguousarray(spec[:, :, :nb].transpose(2, 0, 1))      # (bins, mics, frames)
-            self._cov *= self._forget**n
-            self._cov += (s * self._decay(n, s.real.dtype)) @ s.conj().transpose(0, 2, 1)
-            self._weight = self._forget**n * self._weight + (1 - self._forget**n)
-            self._since += n
-        if len(d) == 0 or n == 0:
+        if n == 0:
             return np.zeros((len(d), n, nb), spec.dtype)
+        # (using every other frame only, which do not overlap, halved this but measurably weakened the
+        # machine's cancellation in the room cases of tests/test_hearing.py)
+        s = np.ascontiguousarray(spec[:, :, :nb].transpose(2, 0, 1))      # (bins, mics, frames)
+        self._cov *= self._forget**n
+        self._cov += (s * self._decay(n, s.real.dtype)) @ s.conj().transpose(0, 2, 1)
+        self._weight = self._forget**n * self._weight + (1 - self._forget**n)
+        self._since += n
+        if len(d) == 0:
+            return np.zeros((0, n, nb), spec.dtype)
         if self._inv is None or self._since >= self._update_frames:
             m = len(self.positions)
             cov = self._cov / max(self._weight, 1e-12)
@@ -238,8 +239,8 @@ class MpdrBeamformer:
                            * arrival_times(self.positions, d, self.sound_speed).T[None]).astype(spec.dtype)
             ri_a = self._inv @ steer
             w = ri_a / np.einsum("fmk,fmk->fk", steer.conj(), ri_a)[:, None, :]
-            self._w_h, self._w_dirs = w.conj().transpose(0, 2, 1), d.copy()
-        return (self._w_h @ spec[:, :, :nb].transpose(2, 0, 1)).transpose(1, 2, 0)  # (k, frames, bins)
+            self._w_h, self._w_dirs = np.ascontiguousarray(w.conj().transpose(0, 2, 1)), d.copy()
+        return (self._w_h @ s).transpose(1, 2, 0)  # (k, frames, bins)
 
 
 def level_db(x: np.ndarray, axis: int = -1) -> np.ndarray:
