@@ -54,6 +54,7 @@ SPEECH_THRESHOLD = 0.5  # frame probability counted as speech (Silero's own defa
 # A 1 s chunk is speech when >= 20 % of its frames are: on the data/sounds dev part every value tried
 # from 0.05 to 0.3 separated speech from non-speech perfectly; 0.2 lies inside that range.
 CHUNK_SPEECH_FRACTION = 0.2
+_HIDDEN = 128        # the LSTM's state size (h and c per stream)
 
 
 @dataclass
@@ -72,7 +73,7 @@ class SileroVad:
 
     ``split`` (8 kHz with the shipped model only; default there): the net split at its one state, the
     encoder of every pending frame of every stream in one onnxruntime call and the LSTM cell stepped in
-    numpy (``SPLIT_8K_*``; the same probabilities within 1e-6). Otherwise one model call per frame."""
+    numpy (``SPLIT_8K_*``; the same probabilities within 2e-6). Otherwise one model call per frame."""
 
     frame_s = FRAME / SAMPLE_RATE  # 32 ms at either rate
 
@@ -101,9 +102,9 @@ class SileroVad:
         if self.split:
             # sigmoid(x) = (1 + tanh(x / 2)) / 2: the i, f and o gates' rows halved, so that one tanh serves
             # all four gates
-            half = np.repeat(np.array([0.5, 0.5, 1.0, 0.5], np.float32), 128)
+            half = np.repeat(np.array([0.5, 0.5, 1.0, 0.5], np.float32), _HIDDEN)
             with np.load(SPLIT_8K_LSTM_PATH) as w:
-                self._w_ih_t = (w["weight_ih"] * half[:, None]).T.copy()   # (128, 512)
+                self._w_ih_t = (w["weight_ih"] * half[:, None]).T.copy()   # (input 128, 4 gates x 128)
                 self._w_hh_t = (w["weight_hh"] * half[:, None]).T.copy()
                 self._bias = (w["bias_ih"] + w["bias_hh"]) * half
                 self._out_w, self._out_b = w["out_weight"], float(w["out_bias"])
@@ -112,7 +113,7 @@ class SileroVad:
         self._sr = np.array(sample_rate, dtype=np.int64)
 
     def new_stream(self) -> VadStream:
-        return VadStream(np.zeros((2, 1, 128), np.float32), np.zeros(self._context, np.float32),
+        return VadStream(np.zeros((2, 1, _HIDDEN), np.float32), np.zeros(self._context, np.float32),
                          np.zeros(0, np.float32))
 
     def process(self, streams: list[VadStream], audio: list[np.ndarray]) -> list[np.ndarray]:
@@ -167,12 +168,13 @@ class SileroVad:
         (features,) = self._session.run(None, {"input": inputs.reshape(n * k, -1)})
         gates_in = (features @ self._w_ih_t + self._bias).reshape(n, k, -1)        # (frames, streams, 4 x 128)
         h, c = state
-        states = np.empty((n, 2, k, h.shape[-1]), np.float32)
+        m = _HIDDEN
+        states = np.empty((n, 2, k, m), np.float32)
         for t in range(n):
             z = np.tanh(gates_in[t] + h @ self._w_hh_t)   # tanh of: i / 2, f / 2, g, o / 2
-            sig = 0.5 * z + 0.5                               # sigmoid(i), sigmoid(f), -, sigmoid(o)
-            c = sig[:, 128:256] * c + sig[:, :128] * z[:, 256:384]
-            h = sig[:, 384:] * np.tanh(c)
+            sig = 0.5 * z + 0.5                            # sigmoid(i), sigmoid(f), -, sigmoid(o)
+            c = sig[:, m:2 * m] * c + sig[:, :m] * z[:, 2 * m:3 * m]
+            h = sig[:, 3 * m:] * np.tanh(c)
             states[t, 0], states[t, 1] = h, c
         return special.expit(np.maximum(states[:, 0], 0) @ self._out_w + self._out_b), states
 
