@@ -6,18 +6,30 @@ The model file ``models/silero_vad_op18_ifless.onnx`` (stored gzip-compressed, `
 2.8 MB in the repository) is copied unchanged from the ``silero-vad``
 6.2.3 wheel (MIT, ``models/silero_vad.LICENSE``; sha256 7671cd04...bd28): that package itself
 requires torch, which the Raspberry Pi does not need for an ONNX model. It is the wheel's dual-rate
-export without ``If`` nodes: at 16 kHz its probabilities equal those of the 16 kHz-only export
+"ifless" export (one ``If`` node only, choosing the 16 or 8 kHz net by ``sr``): at 16 kHz its probabilities equal those of the 16 kHz-only export
 (``silero_vad_16k_op15.onnx``, used before) within 5e-7, and it also runs at 8 kHz.
 
-Cost (one core, onnxruntime 1.32, x86-64, process time per second of audio, one 32 ms frame per call;
-benchmarks/bench_voice.py): 16 kHz 3.5 ms for one stream, 8.8 ms for four batched; 8 kHz 2.8 and 5.8 ms
-(the 16 kHz-only export 4.3 / 9.9). A call costs ~60 us plus ~55 us (16 kHz) or ~30 us (8 kHz) per
-stream. On the data set's dev and test parts the 8 kHz model calls the same 1 s chunks speech as the
-16 kHz one (speech 100 %, every non-speech category 0 %; tests/test_voice.py checks the test part).
+The 8 kHz net split (``SPLIT_8K_*``, derived from that file by ``scripts/split_silero_vad.py``, MIT like it):
+only its LSTM cell carries state from frame to frame; its encoder (STFT as a convolution, four
+convolutions) is stateless. So the encoder of every pending frame of every stream goes through
+onnxruntime in ONE call (batch = frames x streams), rewritten as 2-D convolutions of height 1 with the STFT's
+65 bins padded to 80 channels (zero filters), the same arithmetic, so that onnxruntime runs every
+convolution in its blocked NCHWc kernels; the cell (torch's LSTMCell) and the output layer are stepped in
+numpy. Probabilities equal the whole model's within 2e-6 (tests/test_voice.py). 12 frames (3 frames of
+4 streams): the whole model frame by frame 3 calls, ~530 us; the encoder as shipped 355 us, as 2-D
+convolutions 200 us, padded 107 us; the cell ~15 us per frame. (x86-64 with AVX-512; on the Pi's ARM cores
+the padded 2-D form is the same arithmetic, its speed there not measured.)
+
+Cost (one core, onnxruntime 1.32, x86-64 with AVX-512, process time per second of audio, 100 ms blocks;
+benchmarks/bench_voice.py, minimum of 5 runs on a shared machine): 16 kHz, whole model per frame: 3.7 ms
+for one stream, 9.2 ms for four batched; 8 kHz per frame 3.0 / 6.2 ms (a call ~50 us plus ~30 us per
+stream); 8 kHz split 1.3 / 2.7 ms. On the data set's dev and test parts the 8 kHz model calls the same 1 s
+chunks speech as the 16 kHz one (speech 100 %, every non-speech category 0 %; tests/test_voice.py checks
+the test part).
 
 Streaming and batched: every stream (one beam per tracked source) keeps its own LSTM state and
-its leftover samples; all streams with a whole frame pending go through the network in ONE call
-(batch = streams).
+its leftover samples; all streams with a whole frame pending go through the network together
+(batch = streams; split: batch = frames x streams for the encoder).
 """
 from __future__ import annotations
 

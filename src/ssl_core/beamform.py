@@ -235,8 +235,12 @@ class MpdrBeamformer:
             self._w_h = None
         if (self._w_h is None or d.shape != self._w_dirs.shape
                 or np.min(np.sum(d * self._w_dirs, axis=1)) < self._cos_tolerance):
-            steer = np.exp(-2j * np.pi * self.freqs[:, None, None]
-                           * arrival_times(self.positions, d, self.sound_speed).T[None]).astype(spec.dtype)
+            # exp(-2 pi i f t) as cos and sin of a real phase in the spectra's precision: numpy's complex exp
+            # took 72 us (complex128) or 150 us (complex64) per refresh for 4 beams, cos + sin 12
+            phase = (2 * np.pi * self.freqs[:, None, None]
+                     * arrival_times(self.positions, d, self.sound_speed).T[None]).astype(spec.real.dtype)
+            steer = np.empty(phase.shape, spec.dtype)
+            steer.real, steer.imag = np.cos(phase), -np.sin(phase)
             ri_a = self._inv @ steer
             w = ri_a / np.einsum("fmk,fmk->fk", steer.conj(), ri_a)[:, None, :]
             self._w_h, self._w_dirs = np.ascontiguousarray(w.conj().transpose(0, 2, 1)), d.copy()
