@@ -12,9 +12,9 @@ probabilities). This script copies the 8 kHz branch's nodes and weights as they 
     python scripts/split_silero_vad.py
 
 Writes ``src/robot/models/silero_vad_8k_encoder.onnx.gz`` (input ``input`` (batch, 288) float32: 32
-samples of context + a 256-sample frame; output ``features`` (batch, 128), the LSTM cell's input) and
-``silero_vad_8k_lstm.npz`` (``weight_ih``, ``weight_hh`` (512, 128), ``bias_ih``, ``bias_hh`` (512,) in
-torch's LSTMCell gate order i, f, g, o; ``out_weight`` (128,), ``out_bias`` ()).
+samples of context + a 256-sample frame; output ``input_gates`` (batch, 512): the LSTM cell's input
+projection W_ih x + b_ih + b_hh, torch's LSTMCell gate order i, f, g, o) and ``silero_vad_8k_lstm.npz``
+(``weight_hh`` (512, 128), ``out_weight`` (128,), ``out_bias`` ()).
 """
 from __future__ import annotations
 
@@ -118,11 +118,18 @@ def main() -> None:
     weights.update({t.name: t for t in extra})
     nodes, extra = _pad_bins(nodes, weights)
     weights.update({t.name: t for t in extra})
+    # the cell's input projection too (stateless): W_ih x + b_ih + b_hh, the original Gemm with both biases
+    bias = numpy_helper.to_array(weights[w_ih_gemm.input[2]]) + numpy_helper.to_array(weights[PREFIX + "decoder.rnn.bias_hh"])
+    weights["input_bias"] = numpy_helper.from_array(bias, "input_bias")
+    projection = onnx.NodeProto.FromString(w_ih_gemm.SerializeToString())
+    projection.input[:] = ["features", w_ih_gemm.input[1], "input_bias"]
+    projection.output[:] = ["input_gates"]
+    nodes.append(projection)
     used = {i for n in nodes for i in n.input}
     graph = helper.make_graph(
         nodes, "silero_vad_8k_encoder",
         [helper.make_tensor_value_info("input", TensorProto.FLOAT, ["batch", 288])],
-        [helper.make_tensor_value_info("features", TensorProto.FLOAT, ["batch", 128])],
+        [helper.make_tensor_value_info("input_gates", TensorProto.FLOAT, ["batch", 512])],
         initializer=[weights[name] for name in sorted(used & set(weights))])
     encoder = helper.make_model(graph, opset_imports=model.opset_import, ir_version=model.ir_version,
                                 producer_name="ssl-rescue scripts/split_silero_vad.py")
@@ -131,9 +138,7 @@ def main() -> None:
 
     def w(name: str) -> np.ndarray:
         return numpy_helper.to_array(weights[PREFIX + name]).astype(np.float32)
-    np.savez_compressed(SPLIT_8K_LSTM_PATH, weight_ih=w("decoder.rnn.weight_ih"), weight_hh=w("decoder.rnn.weight_hh"),
-                        bias_ih=w("decoder.rnn.bias_ih"), bias_hh=w("decoder.rnn.bias_hh"),
-                        out_weight=w("decoder.decoder.2.weight").reshape(128), out_bias=w("decoder.decoder.2.bias").reshape(()))
+    np.savez_compressed(SPLIT_8K_LSTM_PATH, weight_hh=w("decoder.rnn.weight_hh"), out_weight=w("decoder.decoder.2.weight").reshape(128), out_bias=w("decoder.decoder.2.bias").reshape(()))
     for p in (SPLIT_8K_ENCODER_PATH, SPLIT_8K_LSTM_PATH):
         print(f"{p.relative_to(ROOT)}: {p.stat().st_size / 1e6:.2f} MB")
 

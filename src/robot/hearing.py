@@ -51,7 +51,6 @@ import numpy as np
 from robot.hal import as_float_audio
 from robot.vad import SAMPLE_RATE, SPEECH_THRESHOLD, SileroVad, VadStream
 from ssl_core.beamform import FULL_SCALE_SINE_MS, MpdrBeamformer, OverlapAdd, StftStream, level_db
-from ssl_core.blas import one_blas_thread
 from ssl_core.noise import NoiseFloor
 from ssl_core.tracking import Track
 
@@ -157,6 +156,7 @@ class Hearing:
         self._level: dict[int, float] = {}   # beam level (dB) per track id, last listening block
 
     def update(self, block: np.ndarray, tracks: Sequence[Track], time: float) -> list[TrackEvidence]:
+        cfg = self.config
         x = np.asarray(block)
         # The whole chain listens in the first vad_on_s of every vad_period_s (stream time), to all tracks
         # at once; in between it only keeps the last samples, and evidence keeps the last listened values.
@@ -171,12 +171,6 @@ class Hearing:
             self._stft.skip(as_float_audio(x[:, -StftStream.HOP:], np.float32))
             self._gap = True
             return self._evidence(tracks, ids, time)
-        with one_blas_thread():   # small matrices (the VAD's LSTM cell): BLAS threads only burn CPU
-            return self._listen(x, tracks, ids, time)
-
-    def _listen(self, x: np.ndarray, tracks: Sequence[Track], ids: list[int], time: float) -> list[TrackEvidence]:
-        """``update`` of a block in the listening time."""
-        cfg = self.config
         if self._gap:   # a new listening burst: the beams fade in, the VAD starts a new frame
             for st in self._state.values():
                 st.synthesis.reset()

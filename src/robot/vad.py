@@ -115,10 +115,9 @@ class SileroVad:
             # sigmoid(x) = (1 + tanh(x / 2)) / 2: the i, f and o gates' rows halved, so that one tanh serves
             # all four gates
             half = np.repeat(np.array([0.5, 0.5, 1.0, 0.5], np.float32), _HIDDEN)
+            self._half = half
             with np.load(SPLIT_8K_LSTM_PATH) as w:
-                self._w_ih_t = (w["weight_ih"] * half[:, None]).T.copy()   # (input 128, 4 gates x 128)
-                self._w_hh_t = (w["weight_hh"] * half[:, None]).T.copy()
-                self._bias = (w["bias_ih"] + w["bias_hh"]) * half
+                self._w_hh_t = (w["weight_hh"] * half[:, None]).T.copy()   # (state 128, 4 gates x 128)
                 self._out_w, self._out_b = w["out_weight"], float(w["out_bias"])
         self.sample_rate = sample_rate
         self.frame, self._context = _FRAMING[sample_rate]
@@ -177,8 +176,10 @@ class SileroVad:
         """``_run`` with the encoder of all frames in one call and the LSTM cell (torch's LSTMCell: gates i, f,
         g, o) stepped in numpy."""
         n, k = inputs.shape[:2]
-        (features,) = self._session.run(None, {"input": inputs.reshape(n * k, -1)})
-        gates_in = (features @ self._w_ih_t + self._bias).reshape(n, k, -1)        # (frames, streams, 4 x 128)
+        # the encoder and the cell's input projection (in the graph: a numpy product of this size woke
+        # OpenBLAS's thread pool, 2.5x the CPU of the whole hearing listening all the time)
+        (gates,) = self._session.run(None, {"input": inputs.reshape(n * k, -1)})
+        gates_in = (gates * self._half).reshape(n, k, -1)                        # (frames, streams, 4 x 128)
         h, c = state
         m = _HIDDEN
         states = np.empty((n, 2, k, m), np.float32)

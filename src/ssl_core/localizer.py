@@ -20,6 +20,7 @@ The whole recording (:meth:`Localizer.locate`) pools the windows' detections
 """
 from __future__ import annotations
 
+import contextlib
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 
@@ -29,7 +30,6 @@ from scipy.spatial import cKDTree
 
 from ssl_core.beamform import FULL_SCALE_SINE_MS as _FULL_SCALE_SINE_MS
 from ssl_core.beamform import arrival_times, delay_and_sum
-from ssl_core.blas import one_blas_thread
 from ssl_core.detection import Detection
 from ssl_core.gcc_phat import LagSteering, band_bins, frame_spectra, summed_phat_cross_spectra
 from ssl_core.geometry import ArrayGeometry, get_array
@@ -48,6 +48,22 @@ from ssl_core.srp import SOUND_SPEED, SteeringTable, tdoa_table
 _NOVELTY_GAIN = 3.0
 _NOVELTY_RIDGE = 0.01
 _TABLE_BYTES_PER_POINT_PAIR = 48  # peak bytes of building the tables, per fine point and pair: tracemalloc, 45-48 at 0.5-1.5 deg
+
+
+def _one_blas_thread():
+    """Pin BLAS to one thread for the hot path: its matrices are small, so OpenBLAS's default
+    thread pool only burns CPU (measured 2.3x-21x, issue 11). threadpoolctl when installed."""
+    global _BLAS
+    if _BLAS is None:
+        try:
+            from threadpoolctl import ThreadpoolController
+            _BLAS = ThreadpoolController()
+        except ImportError:  # pure-Python optional speed-up; numpy/scipy stay the only hard needs
+            _BLAS = False
+    return _BLAS.limit(limits=1, user_api="blas") if _BLAS else contextlib.nullcontext()
+
+
+_BLAS = None
 
 
 @dataclass(frozen=True)
@@ -255,7 +271,7 @@ class Localizer:
     def process(self, block, fs: int | None = None) -> list[LocalizationResult]:
         """Feed a block (channels, samples) of any length; returns the windows it completed."""
         x = self._check(block, fs)
-        with one_blas_thread():
+        with _one_blas_thread():
             return self._process(x, self._stream)
 
     def process_all(self, recording, fs: int | None = None) -> list[LocalizationResult]:
@@ -287,7 +303,7 @@ class Localizer:
         cfg = self.config
         pool = DirectionPool(self.fine_grid.directions)
         gcc_sum, w_sum, w_sq, ms_sum, frames, t_end = 0.0, 0.0, 0.0, 0.0, 0, 0.0
-        with one_blas_thread():
+        with _one_blas_thread():
             for r in self._windows(blocks, fs, self._new_stream()):
                 pool.add(r.detections)
                 t_end = r.time
@@ -324,7 +340,7 @@ class Localizer:
             raise ValueError(
                 f"recording too short: {x.shape[1]} samples, need at least frame_size={self.config.frame_size}"
             )
-        with one_blas_thread():
+        with _one_blas_thread():
             spec, ms = self._analyse(x)
             t_end = ((ms.size - 1) * self.config.hop + self.config.frame_size) / self.config.fs
             return self._window_result(spec, ms, t_end, self._new_stream())
