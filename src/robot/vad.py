@@ -14,11 +14,12 @@ only its LSTM cell carries state from frame to frame; its encoder (STFT as a con
 convolutions) is stateless. So the encoder of every pending frame of every stream goes through
 onnxruntime in ONE call (batch = frames x streams), rewritten as 2-D convolutions of height 1 with the STFT's
 65 bins padded to 80 channels (zero filters), the same arithmetic, so that onnxruntime runs every
-convolution in its blocked NCHWc kernels; the cell (torch's LSTMCell) and the output layer are stepped in
-numpy. Probabilities equal the whole model's within 2e-6 (tests/test_voice.py). 12 frames (3 frames of
-4 streams): the whole model frame by frame 3 calls, ~530 us; the encoder as shipped 355 us, as 2-D
-convolutions 200 us, padded 107 us; the cell ~15 us per frame. (x86-64 with AVX-512; on the Pi's ARM cores
-the padded 2-D form is the same arithmetic, its speed there not measured.)
+convolution in its blocked NCHWc kernels; the same call makes the cell's input projection. The recurrent
+rest of the cell (torch's LSTMCell) and the output layer are stepped in numpy. Probabilities equal the
+whole model's within 2e-6 (tests/test_voice.py). 12 frames (3 frames of 4 streams): the whole model frame
+by frame 3 calls, ~530 us; the encoder as shipped 355 us, as 2-D convolutions 200 us, padded 107 us; the
+cell ~15 us per frame. (x86-64 with AVX-512; on the Pi's ARM cores the padded 2-D form is the same
+arithmetic, its speed there not measured.)
 
 Cost (one core, onnxruntime 1.32, x86-64 with AVX-512, process time per second of audio, 100 ms blocks;
 benchmarks/bench_voice.py, minimum of 5 runs on a shared machine): 16 kHz, whole model per frame: 3.7 ms
