@@ -113,12 +113,11 @@ class SileroVad:
         model = load_model(SPLIT_8K_ENCODER_PATH if self.split else model_path)
         self._session = ort.InferenceSession(model, opts, providers=["CPUExecutionProvider"])
         if self.split:
-            # sigmoid(x) = (1 + tanh(x / 2)) / 2: the i, f and o gates' rows halved, so that one tanh serves
-            # all four gates
-            half = np.repeat(np.array([0.5, 0.5, 1.0, 0.5], np.float32), _HIDDEN)
-            self._half = half
+            # sigmoid(x) = (1 + tanh(x / 2)) / 2: the i, f and o gates' pre-activations halved, so that one
+            # tanh serves all four gates
+            self._half = np.repeat(np.array([0.5, 0.5, 1.0, 0.5], np.float32), _HIDDEN)
             with np.load(SPLIT_8K_LSTM_PATH) as w:
-                self._w_hh_t = (w["weight_hh"] * half[:, None]).T.copy()   # (state 128, 4 gates x 128)
+                self._w_hh_t = (w["weight_hh"] * self._half[:, None]).T.copy()   # (state 128, 4 gates x 128)
                 self._out_w, self._out_b = w["out_weight"], float(w["out_bias"])
         self.sample_rate = sample_rate
         self.frame, self._context = _FRAMING[sample_rate]
@@ -178,7 +177,7 @@ class SileroVad:
         g, o) stepped in numpy."""
         n, k = inputs.shape[:2]
         # the encoder and the cell's input projection (in the graph: a numpy product of this size woke
-        # OpenBLAS's thread pool, 2.5x the CPU of the whole hearing listening all the time)
+        # OpenBLAS's thread pool: 2-3x the CPU of the whole hearing listening all the time)
         (gates,) = self._session.run(None, {"input": inputs.reshape(n * k, -1)})
         gates_in = (gates * self._half).reshape(n, k, -1)                        # (frames, streams, 4 x 128)
         h, c = state
