@@ -8,8 +8,8 @@ fraction of speech frames for a frame-wise VAD, the score for the old one) reach
 chosen per detector on the DEV part (best recall minus false-alarm rate), so each gets its fairest rule.
 Then the CPU cost per second of audio (one core, process time, min and median of 5 runs) of Silero
 at 16 and 8 kHz for 1 and 4 streams (4 tracks' beams, 100 ms blocks; at 8 kHz the whole model frame by
-frame and the split net robot.hearing runs) and under onnxruntime session settings, of WebRTC and of the old score, and of the whole robot.hearing.Hearing (beams + VAD +
-filter) for 4 sounding tracks.
+frame and the split net robot.hearing runs) and under onnxruntime session settings, of WebRTC and of
+the old score, and of the whole robot.hearing.Hearing (beams + VAD + filter) for 4 sounding tracks.
 
     PYTHONPATH=src python benchmarks/bench_voice.py [--cost-only]
 """

@@ -9,11 +9,11 @@ beam (the bin weights of ``ssl_core.noise.NoiseFloor``) -> inverse STFT at 8 kHz
 
 Cost: the chain listens ``vad_on_s`` = 0.5 s in every ``vad_period_s`` = 1 s (all tracks at once;
 in between it only keeps the last samples and the evidence is held; the MPDR covariance, noise floors
-and gain follow listening time). Four tracks cost
-4.1-4.9 ms of CPU per second of audio on one core on a shared 2-core x86-64 (the code before, fc018e3, in
-the same runs: 6.1-7.5; 25-26 ms before that: 16 kHz, every block). Per stage (4.8 ms in a run): Silero 1.6 (its encoder 0.9, the LSTM cell in numpy 0.5, building
-its inputs 0.2: ``robot.vad``'s split net), MPDR 0.9, STFT 0.45, synthesis 0.3, noise floor and gains
-0.25, the rest (power, levels, gain, filter, evidence) 1.2. Listening less (1 s in 2, 0.5 in 1.5,
+and gain follow listening time). Four tracks cost 4.1-4.9 ms of CPU per second of audio on one core of a
+shared 2-core x86-64 (the code before, fc018e3, in the same runs: 6.1-7.5; 25-26 ms before that: 16 kHz,
+every block). Per stage (4.8 ms in a run): Silero 1.6 (its encoder 0.9, the LSTM cell in numpy 0.5,
+building its inputs 0.2: ``robot.vad``'s split net), MPDR 0.9, STFT 0.45, synthesis 0.3, noise floor and
+gains 0.25, the rest (power, levels, gain, filter, evidence) 1.2. Listening less (1 s in 2, 0.5 in 1.5,
 0.4 in 1) or refreshing the MPDR less often lost windows in the room cases of tests/test_hearing.py
 (README, "Cost").
 
