@@ -45,8 +45,8 @@ def _as_2d(nodes: list[onnx.NodeProto], weights: dict[str, onnx.TensorProto],
            features: str) -> tuple[list[onnx.NodeProto], list[onnx.TensorProto]]:
     """The encoder's 1-D convolutions as 2-D ones of height 1 (the same arithmetic): onnxruntime runs 2-D
     convolutions in its blocked NCHWc layout on x86-64 (AVX2 / AVX-512): the encoder of 12 frames took 200 us
-    instead of 355 (onnxruntime 1.32, AVX-512, one thread). The signal is (batch, channels, 1, time) from the STFT's input on; the
-    encoder's output at time step 0 is renamed ``features`` (batch, 128)."""
+    instead of 355 (onnxruntime 1.32, AVX-512, one thread). The signal is (batch, channels, 1, time) from the
+    STFT's input on; the encoder's output at time step 0 is renamed ``features`` (batch, 128)."""
     out, extra = [], [numpy_helper.from_array(np.array([1, 2], np.int64), "axes_channel_height"),
                       numpy_helper.from_array(np.array([2], np.int64), "axis_height")]
     (first,) = [n for n in nodes if n.op_type == "Conv"][:1]
@@ -121,7 +121,8 @@ def main() -> None:
     nodes, extra = _pad_bins(nodes, weights)
     weights.update({t.name: t for t in extra})
     # the cell's input projection too (stateless): W_ih x + b_ih + b_hh, the original Gemm with both biases
-    bias = numpy_helper.to_array(weights[w_ih_gemm.input[2]]) + numpy_helper.to_array(weights[PREFIX + "decoder.rnn.bias_hh"])
+    bias = (numpy_helper.to_array(weights[w_ih_gemm.input[2]])
+            + numpy_helper.to_array(weights[PREFIX + "decoder.rnn.bias_hh"]))
     weights["input_bias"] = numpy_helper.from_array(bias, "input_bias")
     projection = onnx.NodeProto.FromString(w_ih_gemm.SerializeToString())
     projection.input[:] = ["features", w_ih_gemm.input[1], "input_bias"]
@@ -140,7 +141,9 @@ def main() -> None:
 
     def w(name: str) -> np.ndarray:
         return numpy_helper.to_array(weights[PREFIX + name]).astype(np.float32)
-    np.savez_compressed(SPLIT_8K_LSTM_PATH, weight_hh=w("decoder.rnn.weight_hh"), out_weight=w("decoder.decoder.2.weight").reshape(128), out_bias=w("decoder.decoder.2.bias").reshape(()))
+    np.savez_compressed(SPLIT_8K_LSTM_PATH, weight_hh=w("decoder.rnn.weight_hh"),
+                        out_weight=w("decoder.decoder.2.weight").reshape(128),
+                        out_bias=w("decoder.decoder.2.bias").reshape(()))
     for p in (SPLIT_8K_ENCODER_PATH, SPLIT_8K_LSTM_PATH):
         print(f"{p.relative_to(ROOT)}: {p.stat().st_size / 1e6:.2f} MB")
 

@@ -186,7 +186,8 @@ class Hearing:
             return self._evidence(tracks, ids, time)
         power = beams.real**2 + beams.imag**2        # (k, frames, bins < 4 kHz)
         mean_power = power.mean(axis=1)              # (k, bins)
-        levels = 10 * np.log10(np.maximum(StftStream.power_mean_square(mean_power[:, None]), 1e-30) / FULL_SCALE_SINE_MS)
+        mean_square = StftStream.power_mean_square(mean_power[:, None])
+        levels = 10 * np.log10(np.maximum(mean_square, 1e-30) / FULL_SCALE_SINE_MS)
         self._level.update(zip(ids, levels.tolist()))
         if not tracks:
             return self._evidence(tracks, ids, time)

@@ -6,8 +6,9 @@ The model file ``models/silero_vad_op18_ifless.onnx`` (stored gzip-compressed, `
 2.8 MB in the repository) is copied unchanged from the ``silero-vad``
 6.2.3 wheel (MIT, ``models/silero_vad.LICENSE``; sha256 7671cd04...bd28): that package itself
 requires torch, which the Raspberry Pi does not need for an ONNX model. It is the wheel's dual-rate
-"ifless" export (one ``If`` node only, choosing the 16 or 8 kHz net by ``sr``): at 16 kHz its probabilities equal those of the 16 kHz-only export
-(``silero_vad_16k_op15.onnx``, used before) within 5e-7, and it also runs at 8 kHz.
+"ifless" export (one ``If`` node only, choosing the 16 or 8 kHz net by ``sr``): at 16 kHz its probabilities
+equal those of the 16 kHz-only export (``silero_vad_16k_op15.onnx``, used before) within 5e-7, and it also
+runs at 8 kHz.
 
 The 8 kHz net split (``SPLIT_8K_*``, derived from that file by ``scripts/split_silero_vad.py``, MIT like it):
 only its LSTM cell carries state from frame to frame; its encoder (STFT as a convolution, four

@@ -74,8 +74,9 @@ class StftStream:
         if n == 0:
             return np.zeros((buf.shape[0], 0, self.FRAME // 2 + 1), np.result_type(self.dtype, np.complex64))
         # frames as a view: (channels, n, FRAME) with hop HOP (what sliding_window_view gives, without its checks)
+        step = buf.strides[1]
         frames = np.lib.stride_tricks.as_strided(buf, (buf.shape[0], n, self.FRAME),
-                                                 (buf.strides[0], self.HOP * buf.strides[1], buf.strides[1]), writeable=False)
+                                                 (buf.strides[0], self.HOP * step, step), writeable=False)
         return scipy.fft.rfft(frames * self._window, axis=-1)
 
     def skip(self, block: np.ndarray) -> None:
