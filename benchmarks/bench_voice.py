@@ -7,9 +7,9 @@ hand-made score ``benchmarks/old_voice_score.py's voice_likeness``. A chunk is c
 fraction of speech frames for a frame-wise VAD, the score for the old one) reaches a threshold
 chosen per detector on the DEV part (best recall minus false-alarm rate), so each gets its fairest rule.
 Then the CPU cost per second of audio (one core, process time, min and median of 5 runs) of Silero
-at 16 and 8 kHz for 1 and 4 streams (4 tracks' beams, 100 ms blocks) and under onnxruntime session
-settings, of WebRTC and of the old score, and of the whole robot.hearing.Hearing (beams + VAD +
-filter) for 4 sounding tracks.
+at 16 and 8 kHz for 1 and 4 streams (4 tracks' beams, 100 ms blocks; at 8 kHz the whole model frame by
+frame and the split net robot.hearing runs) and under onnxruntime session settings, of WebRTC and of
+the old score, and of the whole robot.hearing.Hearing (beams + VAD + filter) for 4 sounding tracks.
 
     PYTHONPATH=src python benchmarks/bench_voice.py [--cost-only]
 """
@@ -97,16 +97,17 @@ def cost(seconds: float = 5.0, repeats: int = 5) -> dict:
     rng = np.random.default_rng(0)
     x = 0.05 * rng.standard_normal(int(seconds * FS))
     out = {}
-    for rate in (16000, 8000):
+    for rate, split in ((16000, False), (8000, False), (8000, True)):
         xr = x[:: FS // rate]
         for n in (1, 4):
-            vad = SileroVad(sample_rate=rate)
+            vad = SileroVad(sample_rate=rate, split=split)
 
             def run() -> None:
                 streams = [vad.new_stream() for _ in range(n)]
                 for i in range(0, len(xr), rate // 10):
                     vad.process(streams, [xr[i:i + rate // 10]] * n)
-            out[f"silero_{rate // 1000}k_{n}_streams"] = _cpu_ms_per_s(run, seconds, repeats)
+            name = f"silero_{rate // 1000}k_{n}_streams" + ("_split" if split else "_per_frame" if rate == 8000 else "")
+            out[name] = _cpu_ms_per_s(run, seconds, repeats)
     out["silero_8k_4_streams_session_options"] = _session_options_cost(seconds, repeats)
     out["webrtc_1_stream"] = _cpu_ms_per_s(lambda: _webrtc(3)(x), seconds, repeats)
     out["old_score_1_stream"] = _cpu_ms_per_s(

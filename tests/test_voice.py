@@ -46,6 +46,33 @@ def test_8k_mode_calls_the_same_test_chunks_speech(vad):
         assert called8 == _called_speech(vad, r.samples, starts), r.name
 
 
+def test_split_8k_net_gives_the_whole_models_probabilities_in_batched_streams():
+    """The 8 kHz net run split (encoder of all frames at once, LSTM cell in numpy; scripts/split_silero_vad.py)
+    against the unchanged model run frame by frame: three streams fed blocks of unequal, frame-misaligned
+    lengths (so streams complete different numbers of frames per call)."""
+    split, whole = SileroVad(sample_rate=8000), SileroVad(sample_rate=8000, split=False)
+    assert split.split and not whole.split
+    from scipy.signal import resample_poly
+    rec = recordings("test")
+    xs = [resample_poly(r.samples[: 4 * FS], 1, 2) for r in (rec[0], rec[-1], rec[len(rec) // 2])]
+    runs = []
+    for v in (split, whole):
+        streams, out = [v.new_stream() for _ in xs], [[] for _ in xs]
+        pos = [0, 0, 0]
+        for k in range(60):
+            lengths = [(300, 800, 1100)[(k + i) % 3] for i in range(3)]
+            probs = v.process(streams, [x[p:p + n] for x, p, n in zip(xs, pos, lengths)])
+            pos = [p + n for p, n in zip(pos, lengths)]
+            for o, p in zip(out, probs):
+                o.append(p)
+        runs.append([np.concatenate(o) for o in out])
+    for a, b in zip(*runs):
+        assert len(a) == len(b) > 50
+        np.testing.assert_allclose(a, b, atol=1e-5)
+    with pytest.raises(ValueError, match="split"):
+        SileroVad(sample_rate=16000, split=True)
+
+
 def test_data_set_is_speaker_disjoint_16k_mono_and_small():
     dev = {r.name for r in recordings("dev") if r.category in SPEECH_CATEGORIES}
     test = {r.name for r in recordings("test") if r.category in SPEECH_CATEGORIES}

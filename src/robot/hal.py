@@ -159,9 +159,9 @@ class ManualClock(Clock):
         self._t += float(seconds)
 
 
-def as_float_audio(samples: np.ndarray) -> np.ndarray:
-    """int16 -> float in [-1, 1); float passes through as float64."""
+def as_float_audio(samples: np.ndarray, dtype: type = np.float64) -> np.ndarray:
+    """int16 -> float in [-1, 1); float passes through; as ``dtype`` (float64 or float32)."""
     a = np.asarray(samples)
     if a.dtype == np.int16:
-        return a.astype(np.float64) / 32768.0
-    return a.astype(np.float64, copy=False)
+        return np.multiply(a, 1 / 32768.0, dtype=dtype)
+    return a.astype(dtype, copy=False)

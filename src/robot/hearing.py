@@ -9,10 +9,13 @@ beam (the bin weights of ``ssl_core.noise.NoiseFloor``) -> inverse STFT at 8 kHz
 
 Cost: the chain listens ``vad_on_s`` = 0.5 s in every ``vad_period_s`` = 1 s (all tracks at once;
 in between it only keeps the last samples and the evidence is held; the MPDR covariance, noise floors
-and gain follow listening time). Four tracks cost
-6.0-6.4 ms of CPU per second of audio on one core (25-26 ms before: 16 kHz, every block); Silero alone is
-2.6-2.9 ms of it. Listening less (1 s in 2, 0.5 in 1.5, 0.4 in 1) or refreshing the MPDR less often
-lost windows in the room cases of tests/test_hearing.py (README, "Cost").
+and gain follow listening time). Four tracks cost 4.1-4.9 ms of CPU per second of audio on one core of a
+shared 2-core x86-64 (the code before, fc018e3, in the same runs: 6.1-7.5; 25-26 ms before that: 16 kHz,
+every block). Per stage (4.8 ms in a run): Silero 1.6 (its encoder 0.9, the LSTM cell in numpy 0.5,
+building its inputs 0.2: ``robot.vad``'s split net), MPDR 0.9, STFT 0.45, synthesis 0.3, noise floor and
+gains 0.25, the rest (power, levels, gain, filter, evidence) 1.2. Listening less (1 s in 2, 0.5 in 1.5,
+0.4 in 1) or refreshing the MPDR less often lost windows in the room cases of tests/test_hearing.py
+(README, "Cost").
 
 Why this front end (``benchmarks/bench_voice.py``, five rooms of RT60 0.6 s with a talker and a real
 machine recording 6 dB louder, both 2 m away): Silero hears her in 26 % of her talking seconds at one
@@ -157,7 +160,7 @@ class Hearing:
 
     def update(self, block: np.ndarray, tracks: Sequence[Track], time: float) -> list[TrackEvidence]:
         cfg = self.config
-        x = as_float_audio(block)
+        x = np.asarray(block)
         # The whole chain listens in the first vad_on_s of every vad_period_s (stream time), to all tracks
         # at once; in between it only keeps the last samples, and evidence keeps the last listened values.
         listening = self._samples % self._period < self._on
@@ -168,7 +171,7 @@ class Hearing:
         for gone in set(self._level) - set(ids):
             del self._level[gone]
         if not listening:
-            self._stft.skip(x)
+            self._stft.skip(as_float_audio(x[:, -StftStream.HOP:], np.float32))
             self._gap = True
             return self._evidence(tracks, ids, time)
         if self._gap:   # a new listening burst: the beams fade in, the VAD starts a new frame
@@ -178,11 +181,15 @@ class Hearing:
             self._gap = False
         dt = x.shape[-1] / SAMPLE_RATE
         directions = np.array([np.asarray(t.direction, float) for t in tracks]).reshape(-1, 3)
-        beams = self.beamformer.process(self._stft.analyse(x), directions)        # (k, frames, bins < 4 kHz)
-        if beams.shape[1]:
-            levels = 10 * np.log10(np.maximum(StftStream.mean_square(beams), 1e-30) / FULL_SCALE_SINE_MS)
-            self._level.update(zip(ids, levels.tolist()))
-        if not tracks or not beams.shape[1]:
+        beams = self.beamformer.process(self._stft.analyse(as_float_audio(x, np.float32)), directions)
+        if not beams.shape[1]:
+            return self._evidence(tracks, ids, time)
+        power = beams.real**2 + beams.imag**2        # (k, frames, bins < 4 kHz)
+        mean_power = power.mean(axis=1)              # (k, bins)
+        mean_square = StftStream.power_mean_square(mean_power[:, None])
+        levels = 10 * np.log10(np.maximum(mean_square, 1e-30) / FULL_SCALE_SINE_MS)
+        self._level.update(zip(ids, levels.tolist()))
+        if not tracks:
             return self._evidence(tracks, ids, time)
         memory = max(1, int(round(cfg.noise_memory_s / max(dt, StftStream.HOP / SAMPLE_RATE))))
         states = []
@@ -190,18 +197,18 @@ class Hearing:
             if i not in self._state:
                 self._state[i] = _TrackState(self.vad.new_stream(), NoiseFloor(memory), OverlapAdd(self._decimation))
             states.append(self._state[i])
-        power = beams.real**2 + beams.imag**2
-        floors = np.stack([st.noise.update(p) for st, p in zip(states, power)])   # (k, bins)
+        floors = np.stack([st.noise.update_mean(m) for st, m in zip(states, mean_power)])   # (k, bins)
         weights = states[0].noise.gains(power, floors[:, None])
         # share of each beam's power above its noise floor (an SNR: the talker's own beam, whose MPDR
         # cancels the machine, has more of it than the machine's beam she leaks into)
-        excess = (power * weights).sum(axis=(1, 2)) / np.maximum(power.sum(axis=(1, 2)), 1e-30)
+        excess = (power * weights).sum(axis=(1, 2)) / np.maximum(mean_power.sum(axis=1) * power.shape[1], 1e-30)
         clean = OverlapAdd.synthesise_all([st.synthesis for st in states],
                                           beams * np.maximum(weights, cfg.noise_min_gain))
         follow = 1 - math.exp(-dt / cfg.level_tau_s)
-        for st, lvl, row in zip(states, level_db(clean, axis=-1).tolist(), clean):
+        for st, lvl in zip(states, level_db(clean, axis=-1).tolist()):
             st.slow_db = lvl if st.slow_db is None else st.slow_db + (lvl - st.slow_db) * follow
-            row *= 10 ** (min(cfg.vad_level_db - st.slow_db, cfg.max_gain_db) / 20)
+        slow_db = np.array([st.slow_db for st in states], clean.dtype)
+        clean *= (10 ** (np.minimum(cfg.vad_level_db - slow_db, cfg.max_gain_db) / 20))[:, None]
         probs = self.vad.process([st.vad for st in states], list(clean))
         # Speech heard in several beams at once goes to the beam in which the largest share of the power
         # stands above its noise floor: a talker leaks into a machine's beam (Silero hears speech far

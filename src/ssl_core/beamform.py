@@ -68,19 +68,25 @@ class StftStream:
     def analyse(self, block: np.ndarray) -> np.ndarray:
         """``block`` (n_channels, n) float -> spectra (n_channels, n_frames, FRAME // 2 + 1) of the frames
         completed by it (any block length; n_frames may be 0)."""
-        buf = np.concatenate([self._pending, np.asarray(block, self.dtype)], axis=1)
+        buf = np.concatenate([self._pending, block], axis=1, dtype=self.dtype)
         n = (buf.shape[1] - self.FRAME) // self.HOP + 1 if buf.shape[1] >= self.FRAME else 0
         self._pending = buf[:, n * self.HOP:]
         if n == 0:
             return np.zeros((buf.shape[0], 0, self.FRAME // 2 + 1), np.result_type(self.dtype, np.complex64))
-        frames = np.lib.stride_tricks.sliding_window_view(buf, self.FRAME, axis=1)[:, :: self.HOP][:, :n]
+        # frames as a view: (channels, n, FRAME) with hop HOP (what sliding_window_view gives, without its checks)
+        step = buf.strides[1]
+        frames = np.lib.stride_tricks.as_strided(buf, (buf.shape[0], n, self.FRAME),
+                                                 (buf.strides[0], self.HOP * step, step), writeable=False)
         return scipy.fft.rfft(frames * self._window, axis=-1)
 
     def skip(self, block: np.ndarray) -> None:
         """Pass over ``block`` (n_channels, n) without analysing it: the next frame starts HOP samples
         before its end."""
-        buf = np.concatenate([self._pending, np.asarray(block, self.dtype)], axis=1)
-        self._pending = buf[:, buf.shape[1] - self.HOP:]
+        block = np.asarray(block)
+        if block.shape[1] >= self.HOP:
+            self._pending = np.array(block[:, block.shape[1] - self.HOP:], self.dtype)
+        else:
+            self._pending = np.concatenate([self._pending, block], axis=1, dtype=self.dtype)[:, block.shape[1]:]
 
     @classmethod
     def mean_square(cls, spec: np.ndarray) -> np.ndarray:
@@ -88,11 +94,16 @@ class StftStream:
         averaged over frames (Parseval with the window's energy). ``bins`` may be the first bins only
         (a band from 0 Hz below Nyquist, e.g. ``MpdrBeamformer(max_freq_hz=...)``): then the mean square
         of that band."""
-        p = spec.real**2 + spec.imag**2
+        return cls.power_mean_square(spec.real**2 + spec.imag**2)
+
+    @classmethod
+    def power_mean_square(cls, power: np.ndarray) -> np.ndarray:
+        """``mean_square`` from the bins' power ``|spec|**2`` (..., n_frames, bins)."""
+        p = power
         total = 2 * p.sum(axis=-1) - p[..., 0]
-        if spec.shape[-1] == cls.FRAME // 2 + 1:
+        if p.shape[-1] == cls.FRAME // 2 + 1:
             total -= p[..., -1]  # the Nyquist bin, like 0 Hz, has no mirror
-        return total.mean(axis=-1) / (cls.FRAME * cls._WINDOW_ENERGY) if spec.shape[-2] else np.zeros(spec.shape[:-2])
+        return total.mean(axis=-1) / (cls.FRAME * cls._WINDOW_ENERGY) if p.shape[-2] else np.zeros(p.shape[:-2])
 
 
 class OverlapAdd:
@@ -189,13 +200,13 @@ class MpdrBeamformer:
         self._since = 0          # frames since _inv was computed
         self._w_h = None         # conjugated weights (bins, k, m) for _w_dirs
         self._w_dirs = np.zeros((0, 3))
-        self._decays: dict[int, np.ndarray] = {}
+        self._decays: dict[tuple[int, np.dtype], np.ndarray] = {}
 
-    def _decay(self, n: int) -> np.ndarray:
+    def _decay(self, n: int, dtype: np.dtype) -> np.ndarray:
         """Weights in R of n new frames, oldest first."""
-        if n not in self._decays:
-            self._decays[n] = (1 - self._forget) * self._forget ** np.arange(n - 1, -1, -1)
-        return self._decays[n]
+        if (n, dtype) not in self._decays:
+            self._decays[n, dtype] = ((1 - self._forget) * self._forget ** np.arange(n - 1, -1, -1)).astype(dtype)
+        return self._decays[n, dtype]
 
     def process(self, spec: np.ndarray, directions: np.ndarray) -> np.ndarray:
         """``spec`` (n_mics, n_frames, bins) from ``StftStream``; ``directions`` (k, 3) -> beams
@@ -205,16 +216,17 @@ class MpdrBeamformer:
         nb = len(self.freqs)
         if self._cov is None or self._cov.dtype != spec.dtype:
             self._cov, self._weight, self._inv = np.zeros((nb, len(self.positions), len(self.positions)), spec.dtype), 0.0, None
-        if n:
-            # (using every other frame only, which do not overlap, halved this but measurably weakened the
-            # machine's cancellation in the room cases of tests/test_hearing.py)
-            s = np.ascontiguousarray(spec[:, :, :nb].transpose(2, 0, 1))      # (bins, mics, frames)
-            self._cov *= self._forget**n
-            self._cov += (s * self._decay(n).astype(s.real.dtype)) @ s.conj().transpose(0, 2, 1)
-            self._weight = self._forget**n * self._weight + (1 - self._forget**n)
-            self._since += n
-        if len(d) == 0 or n == 0:
+        if n == 0:
             return np.zeros((len(d), n, nb), spec.dtype)
+        # (using every other frame only, which do not overlap, halved this but measurably weakened the
+        # machine's cancellation in the room cases of tests/test_hearing.py)
+        s = np.ascontiguousarray(spec[:, :, :nb].transpose(2, 0, 1))      # (bins, mics, frames)
+        self._cov *= self._forget**n
+        self._cov += (s * self._decay(n, s.real.dtype)) @ s.conj().transpose(0, 2, 1)
+        self._weight = self._forget**n * self._weight + (1 - self._forget**n)
+        self._since += n
+        if len(d) == 0:
+            return np.zeros((0, n, nb), spec.dtype)
         if self._inv is None or self._since >= self._update_frames:
             m = len(self.positions)
             cov = self._cov / max(self._weight, 1e-12)
@@ -224,12 +236,16 @@ class MpdrBeamformer:
             self._w_h = None
         if (self._w_h is None or d.shape != self._w_dirs.shape
                 or np.min(np.sum(d * self._w_dirs, axis=1)) < self._cos_tolerance):
-            steer = np.exp(-2j * np.pi * self.freqs[:, None, None]
-                           * arrival_times(self.positions, d, self.sound_speed).T[None]).astype(spec.dtype)
+            # exp(-2 pi i f t) as cos and sin of a real phase in the spectra's precision: numpy's complex exp
+            # took 72 us (complex128) or 150 us (complex64) per refresh for 4 beams, cos + sin 12
+            phase = (2 * np.pi * self.freqs[:, None, None]
+                     * arrival_times(self.positions, d, self.sound_speed).T[None]).astype(spec.real.dtype)
+            steer = np.empty(phase.shape, spec.dtype)
+            steer.real, steer.imag = np.cos(phase), -np.sin(phase)
             ri_a = self._inv @ steer
             w = ri_a / np.einsum("fmk,fmk->fk", steer.conj(), ri_a)[:, None, :]
-            self._w_h, self._w_dirs = w.conj().transpose(0, 2, 1), d.copy()
-        return (self._w_h @ spec[:, :, :nb].transpose(2, 0, 1)).transpose(1, 2, 0)  # (k, frames, bins)
+            self._w_h, self._w_dirs = np.ascontiguousarray(w.conj().transpose(0, 2, 1)), d.copy()
+        return (self._w_h @ s).transpose(1, 2, 0)  # (k, frames, bins)
 
 
 def level_db(x: np.ndarray, axis: int = -1) -> np.ndarray:

@@ -35,7 +35,10 @@ class NoiseFloor:
 
     def update(self, power: np.ndarray) -> np.ndarray:
         """Take one chunk of band power ``(frames, bins)`` into the floor; returns the floor ``(bins,)``."""
-        mean = power.mean(axis=0)
+        return self.update_mean(power.mean(axis=0))
+
+    def update_mean(self, mean: np.ndarray) -> np.ndarray:
+        """``update`` from the chunk's mean band power over its frames ``(bins,)``."""
         if self._means is None or self._means.shape[1:] != mean.shape:
             self._means, self._count = np.empty((self._memory, *mean.shape), mean.dtype), 0
         self._means[self._count % self._memory] = mean
