@@ -75,8 +75,8 @@ ROOM_CASES = [("it_carlo", "ore_mine", 30, -50), ("fr_june", "industry_light", 1
               ("en_librivox", "jackhammer", -100, 0), ("it_carlo", "mill", 170, 90), ("fr_june", "ore_mine", 0, -70)]
 # Tuning rooms for the localizer's search beside a machine (never scored in tests): the dev part's talkers
 # and machines (with a hammer and an engine: bursty and changing like the jackhammer and the mill), other
-# azimuths (65-160 deg apart), the robot elsewhere in the room and another simulation
-# seed; room_case(*case, split="dev", robot_xy=DEV_ROBOT_XY, seed=DEV_SEED).
+# azimuths (65-160 deg apart), the robot elsewhere in the room and another simulation seed;
+# room_case(*case, split="dev", robot_xy=DEV_ROBOT_XY, seed=DEV_SEED) (benchmarks/bench_talker_rooms.py).
 DEV_ROOM_CASES = [("en_allison", "mining_machinery", 75, -10), ("ru_ivrvoice", "sawmill", -140, 140),
                   ("en_an4", "industry_high", 10, 110), ("en_allison", "power_coal", -30, -120),
                   ("ru_ivrvoice", "industry_high", 160, 60), ("en_an4", "mining_machinery", -80, 80),
@@ -85,10 +85,9 @@ DEV_ROBOT_XY, DEV_SEED = (3.2, 2.7), 7
 
 
 def room_case(talker: str, machine: str, az_t: float, az_m: float, seconds: int = 16, sir_db: float = -6.0,
-              rt60_s: float = 0.6, with_talker: bool = True, with_machine: bool = True,
-              split: str = "test",
+              rt60_s: float = 0.6, with_talker: bool = True, with_machine: bool = True, split: str = "test",
               robot_xy: tuple[float, float] = (3.5, 3.0), seed: int = 1):
-    """The cube array in a 7 x 6 x 3.2 m room of ``rt60_s`` (ssl_sim), a talker (test part, looped) and a
+    """The cube array in a 7 x 6 x 3.2 m room of ``rt60_s`` (ssl_sim), a talker (``split`` part, looped) and a
     machine recording ``-sir_db`` dB louder (talker level = RMS while talking, machine = RMS), 2 m away;
     ``with_talker=False``: the machine alone (her direction and talking seconds still returned),
     ``with_machine=False``: the talker alone;

@@ -50,8 +50,9 @@ from ssl_core.srp import SOUND_SPEED, SteeringTable, tdoa_table
 _NOVELTY_GAIN = 3.0
 _NOVELTY_RIDGE = 0.01
 # The rescan's onset weight clip(1 - g_on Pbar / P, 0, 1) (Localizer._onset_weights): g_on 2 and the 64 ms
-# memory (LocalizerConfig.onset_memory_s) sit in the middle of a plateau (g_on 1.5-3, memory 32-128 ms within
-# 2 points of her detections) on the tuning rooms (tests/sound_dataset.py DEV_ROOM_CASES, README).
+# memory (LocalizerConfig.onset_memory_s) sit in the middle of a plateau on the first six tuning rooms
+# (tests/sound_dataset.py DEV_ROOM_CASES, README): her -6 dB windows detected 77-79 % for g_on 1.5-3 x memory
+# 32-128 ms, except g_on 1.5 at 128 ms (73 %); g_on 4 was no better on all eight.
 _ONSET_GAIN = 2.0
 _TABLE_BYTES_PER_POINT_PAIR = 48  # peak bytes of building the tables, per fine point and pair: tracemalloc, 45-48 at 0.5-1.5 deg
 
@@ -112,7 +113,7 @@ class LocalizerConfig:
     # the summed map): then the paper's rescan of the same map, as with the option off.
     # The rescan's bins are also weighted by their onset (Localizer._onset_weights): power above the recent
     # mean of the same bin, memory ``onset_memory_s``. At a speech onset the direct path leads the room's
-    # response (the precedence effect), so these bins carry her direction, not her or the machine's echoes.
+    # response (the precedence effect), so these bins carry her direction, not the echoes of her or of the machine.
     interference_rescan: bool = False
     interference_memory_s: float = 1.5
     rescan_memory_s: float = 1.6
