@@ -73,13 +73,26 @@ def chunk_starts(rec: Recording) -> list[int]:
 # part), their azimuths (deg, array frame); both 2 m from the array centre, at its height.
 ROOM_CASES = [("it_carlo", "ore_mine", 30, -50), ("fr_june", "industry_light", 120, 40),
               ("en_librivox", "jackhammer", -100, 0), ("it_carlo", "mill", 170, 90), ("fr_june", "ore_mine", 0, -70)]
+# Tuning rooms for the localizer's search beside a machine (never scored in tests): the dev part's talkers
+# and machines (with a hammer and an engine: bursty and changing like the jackhammer and the mill), other
+# azimuths (65-160 deg apart), the robot elsewhere in the room and another simulation seed;
+# room_case(*case, split="dev", robot_xy=DEV_ROBOT_XY, seed=DEV_SEED) (benchmarks/bench_talker_rooms.py).
+DEV_ROOM_CASES = [("en_allison", "mining_machinery", 75, -10), ("ru_ivrvoice", "sawmill", -140, 140),
+                  ("en_an4", "industry_high", 10, 110), ("en_allison", "power_coal", -30, -120),
+                  ("ru_ivrvoice", "industry_high", 160, 60), ("en_an4", "mining_machinery", -80, 80),
+                  ("ru_ivrvoice", "blacksmith", 100, 20), ("en_allison", "truck_start", -170, -60)]
+DEV_ROBOT_XY, DEV_SEED = (3.2, 2.7), 7
 
 
 def room_case(talker: str, machine: str, az_t: float, az_m: float, seconds: int = 16, sir_db: float = -6.0,
-              rt60_s: float = 0.6, with_talker: bool = True):
-    """The cube array in a 7 x 6 x 3.2 m room of ``rt60_s`` (ssl_sim), a talker (test part, looped) and a
+              rt60_s: float = 0.6, with_talker: bool = True, with_machine: bool = True, split: str = "test",
+              robot_xy: tuple[float, float] = (3.5, 3.0), seed: int = 1):
+    """The cube array in a 7 x 6 x 3.2 m room of ``rt60_s`` (ssl_sim), a talker (``split`` part, looped) and a
     machine recording ``-sir_db`` dB louder (talker level = RMS while talking, machine = RMS), 2 m away;
-    ``with_talker=False``: the machine alone (her direction and talking seconds still returned).
+    ``with_talker=False``: the machine alone (her direction and talking seconds still returned),
+    ``with_machine=False``: the talker alone;
+    ``split``: the data set part the recordings come from; ``robot_xy`` (m, room frame) and ``seed``
+    (the simulation's) make other rooms of the same kind.
     Returns (int16 (8, n) audio, the two true unit directions (array frame), per 1 s: does she talk?)."""
     from ssl_sim.acoustics import AcousticConfig, AcousticSimulator, RobotPose
     from ssl_sim.acoustics.pose import ArrayMount
@@ -87,8 +100,8 @@ def room_case(talker: str, machine: str, az_t: float, az_m: float, seconds: int 
     from ssl_sim.acoustics.sources import SoundSource
     from ssl_sim.world import Room, World
 
-    rec = {r.name: r for r in recordings("test")}
-    pose, mount = RobotPose(3.5, 3.0, yaw=0.0), ArrayMount()
+    rec = {r.name: r for r in recordings(split)}
+    pose, mount = RobotPose(*robot_xy, yaw=0.0), ArrayMount()
     c = mount.centre_world(pose)
     dirs = [np.array([np.cos(np.deg2rad(a)), np.sin(np.deg2rad(a)), 0.0]) for a in (az_t, az_m)]
     speech = rec[talker].samples
@@ -98,8 +111,8 @@ def room_case(talker: str, machine: str, az_t: float, az_m: float, seconds: int 
     active_rms = np.sqrt((fr[talking] ** 2).mean())
     srcs = [SoundSource(tuple(c + 2.0 * dirs[0]), LoopedSignal(speech / active_rms, FS, normalise=False), 62.0),
             SoundSource(tuple(c + 2.0 * dirs[1]), LoopedSignal(rec[machine].samples, FS), 62.0 - sir_db)]
-    srcs = srcs if with_talker else srcs[1:]
-    sim = AcousticSimulator(World(room=Room((7.0, 6.0, 3.2))), AcousticConfig(rt60_s=rt60_s, seed=1), srcs)
+    srcs = [s for s, on in zip(srcs, (with_talker, with_machine)) if on]
+    sim = AcousticSimulator(World(room=Room((7.0, 6.0, 3.2))), AcousticConfig(rt60_s=rt60_s, seed=seed), srcs)
     x = sim.listen_pose(pose, float(seconds), mount=mount)
     per_s = FS // _FRAME
     she_talks = [bool(talking[np.arange(w * per_s, (w + 1) * per_s) % len(talking)].mean() >= 0.5) for w in range(seconds)]

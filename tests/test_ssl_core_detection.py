@@ -126,7 +126,7 @@ def test_the_interference_rescan_finds_a_talker_beside_a_machine_and_adds_no_gho
     """Real recordings 2 m away in an RT60 0.6 s room (tests/sound_dataset.py): a talker at 30 deg beside
     a machine at -50 deg of equal level (0 dB SIR), and the machine alone; two sources per window at the
     tracking gate. With the rescan a detection within 10 deg of her comes in at least twice as many of
-    her windows (measured 13 -> 57 of 109), and with the machine alone the detections more than 20 deg
+    her windows (measured 13 -> 79 of 109), and with the machine alone the detections more than 20 deg
     from it (its reflections) do not grow (measured 4 -> 4 of 124)."""
     from sound_dataset import room_case
     from ssl_core.tracking import TRACKING_MIN_SIGNIFICANCE

@@ -26,6 +26,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 from scipy.ndimage import maximum_filter1d
+from scipy.signal import lfilter
 from scipy.spatial import cKDTree
 
 from ssl_core.beamform import FULL_SCALE_SINE_MS as _FULL_SCALE_SINE_MS
@@ -39,14 +40,20 @@ from ssl_core.peaks import local_maxima, neighbour_table
 from ssl_core.pooling import DirectionPool
 from ssl_core.srp import SOUND_SPEED, SteeringTable, tdoa_table
 
-# interference_rescan's novelty weight w = clip(1 - g / q, 0, 1): g = 3 and the rescan memory 0.8 s were
-# the best of g in {2, 3, 4} x memory {0.6, 0.8, 1.2 s} x covariance memory {1.5, 3 s} on the real-chain
-# rooms of tests/test_hearing.py, and again of g {2, 3} x memory {0.8, 1.2, 2 s} with the peak-elsewhere
-# rule (README, "Telling a victim from a machine"); ridge: 1 % of the mean
+# interference_rescan's novelty weight w = clip(1 - g / q, 0, 1): g = 3 was the best of g in {2, 3, 4} x
+# rescan memory {0.6, 0.8, 1.2 s} x covariance memory {1.5, 3 s} on the real-chain rooms of
+# tests/test_hearing.py, and again of g {2, 3} x memory {0.8, 1.2, 2 s} with the peak-elsewhere rule; with
+# the onset weight, on the tuning rooms (DEV_ROOM_CASES): g 3 over 2, rescan memory 1.6 s over 0.4 / 0.8 /
+# 2.4 / 3.2 s, covariance memory 1.5 over 3 s (README, "Telling a victim from a machine"); ridge: 1 % of the mean
 # eigenvalue keeps R invertible where few frames have filled it (0.1 % and 10 % measured within a few
 # windows of it per room).
 _NOVELTY_GAIN = 3.0
 _NOVELTY_RIDGE = 0.01
+# The rescan's onset weight clip(1 - g_on Pbar / P, 0, 1) (Localizer._onset_weights): g_on 2 and the 64 ms
+# memory (LocalizerConfig.onset_memory_s) sit in the middle of a plateau on the first six tuning rooms
+# (tests/sound_dataset.py DEV_ROOM_CASES, README): her -6 dB windows detected 77-79 % for g_on 1.5-3 x memory
+# 32-128 ms, except g_on 1.5 at 128 ms (73 %); g_on 4 was no better on all eight.
+_ONSET_GAIN = 2.0
 _TABLE_BYTES_PER_POINT_PAIR = 48  # peak bytes of building the tables, per fine point and pair: tracemalloc, 45-48 at 0.5-1.5 deg
 
 
@@ -104,9 +111,13 @@ class LocalizerConfig:
     # that covariance and fade; a talker's bursts stand out. Used only when that map peaks away from the
     # first source (else the novel source is the one found, and its reflections would pass the test in
     # the summed map): then the paper's rescan of the same map, as with the option off.
+    # The rescan's bins are also weighted by their onset (Localizer._onset_weights): power above the recent
+    # mean of the same bin, memory ``onset_memory_s``. At a speech onset the direct path leads the room's
+    # response (the precedence effect), so these bins carry her direction, not the echoes of her or of the machine.
     interference_rescan: bool = False
     interference_memory_s: float = 1.5
-    rescan_memory_s: float = 0.8
+    rescan_memory_s: float = 1.6
+    onset_memory_s: float = 0.064
     upsample: int = 4                     # GCC interpolation factor
     sound_speed: float = SOUND_SPEED      # m/s
 
@@ -133,6 +144,7 @@ class LocalizerConfig:
         need(self.noise_memory_s > 0, "noise_memory_s", "> 0 s")
         need(self.interference_memory_s > 0, "interference_memory_s", "> 0 s")
         need(self.rescan_memory_s > 0, "rescan_memory_s", "> 0 s")
+        need(self.onset_memory_s > 0, "onset_memory_s", "> 0 s")
         if self.n_sources > 1:
             need(self.min_separation_deg >= 2 * self.coarse_resolution_deg, "min_separation_deg",
                  f">= 2 x coarse_resolution_deg = {2 * self.coarse_resolution_deg:g} degrees: the coarse grid is "
@@ -169,6 +181,7 @@ class _Stream:
     cov: np.ndarray | None = None
     cov_windows: int = 0
     rescan: tuple[np.ndarray, float, float] | None = None
+    onset_mean: np.ndarray | None = None  # per-bin recent mean power (bins,) of the onset weights
 
 
 class Localizer:
@@ -457,8 +470,9 @@ class Localizer:
         cfg = self.config
         x = spec.transpose(2, 0, 1)  # (bins, channels, frames)
         out = None
+        onset = self._onset_weights(x, st)
         if st.cov is not None and st.cov_windows >= 2:
-            w = self._spatial_novelty(x, st.cov)
+            w = self._spatial_novelty(x, st.cov) * onset
             g, w_sum, n_eff = self._gcc(spec, w if weights is None else w * weights)
             keep = np.exp(-self._window_s / cfg.rescan_memory_s)
             g_acc, w_acc, w2_acc = st.rescan if st.rescan is not None else (0.0, 0.0, 0.0)
@@ -472,6 +486,27 @@ class Localizer:
         st.cov = now if st.cov is None else a * st.cov + (1 - a) * now
         st.cov_windows += 1
         return out
+
+    def _onset_weights(self, x: np.ndarray, st: _Stream) -> np.ndarray:
+        """Weights (frames, bins) in [0, 1] of frames ``x`` (bins, channels, frames): ``clip(1 - g_on Pbar / P,
+        0, 1)``, ``P`` the channel-mean power of the bin, ``Pbar`` its exponential mean over the frames
+        before (memory ``onset_memory_s``; state in ``st``). Updates that mean.
+
+        Why: in a room a sound's direct path arrives first and its reflections build up over the next tens
+        of ms, so the bins whose power rises above their recent past carry the direct path (the precedence
+        effect; the onset-weighted GCC of Wilson and Darrell 2006, "Learning a precedence effect-like
+        weighting function for the generalized cross-correlation framework"). At 2 m in an RT60 0.6 s room
+        the direct path is ~10 dB below the reverberant field, and the spatial novelty alone also passes
+        the reverberant tail of her syllables and of a changing machine."""
+        p = (x.real**2 + x.imag**2).mean(axis=1)  # (bins, frames)
+        a = np.exp(-self.config.hop / (self.config.fs * self.config.onset_memory_s))
+        before = p[:, :1] if st.onset_mean is None else st.onset_mean[:, None]
+        # the recursive mean after each frame (scipy's first-order filter from the stored state)
+        after, _ = lfilter([1 - a], [1, -a], p, axis=1, zi=a * before)
+        before = np.concatenate([before, after[:, :-1]], axis=1)
+        st.onset_mean = after[:, -1]
+        w = 1.0 - _ONSET_GAIN * before / np.maximum(p, np.finfo(p.dtype).tiny)
+        return np.clip(w, 0.0, 1.0).T.astype(np.float32)
 
     @staticmethod
     def _spatial_novelty(x: np.ndarray, cov: np.ndarray) -> np.ndarray:
