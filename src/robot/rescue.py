@@ -228,7 +228,8 @@ class RescueBehaviour:
         self._silent = 0
         self._close_listens: dict[int, int] = {}
         self._unheard_at: dict[int, int] = {}     # listens at a source's estimate that did not hear it
-        self._cue: dict[int, str] = {}            # the found cue a source showed in an earlier listen
+        self._cue: dict[int, tuple[str, bool]] = {}   # the found cue a source showed in an earlier listen (and
+        #                                                whether it was a steep bearing)
         self._target_contacts: dict[int, int] = {}
         self._side = 1.0                          # alternating side of baseline steps
         self._faults_seen: tuple[str, ...] = ()
@@ -377,6 +378,7 @@ class RescueBehaviour:
                 elif steep >= cfg.corroborated_elevation_deg and rise >= cfg.level_rise_db:
                     crit = (f"elevation {-steep:.0f} deg (< -{cfg.corroborated_elevation_deg:g}) and level rose "
                             f"{rise:.1f} dB (>= {cfg.level_rise_db:g})")
+                    steep_cue = True
             d = s.distance_to(xy)
             # The map alone is not enough (a wrong triangulation would declare empty floor): the bearing heard
             # now must point down as a mouth on the floor within reach does (elevation supporting).
@@ -388,12 +390,13 @@ class RescueBehaviour:
                         f"{s.horizontal_sigma_m:.2f} m from {s.n_inliers} listens")
             reached = d <= cfg.found_distance_m and s.horizontal_sigma_m <= cfg.found_sigma_m and s.triangulated
             if crit is not None:
-                self._cue[sid] = crit
+                self._cue[sid] = (crit, steep_cue)
             elif reached and sid in self._cue:
                 # It showed a found cue from here before and is silent now: a caller pauses (measured, light rubble
                 # seed 7: the caller behind the pillar heard steep and 10-18 dB louder in three listens, then
                 # rejected as a reflection on the fourth, in which it did not call).
-                crit = f"{self._cue[sid]}, in an earlier listen; map estimate {d:.2f} m away"
+                earlier, steep_cue = self._cue[sid]
+                crit = f"{earlier}, in an earlier listen; map estimate {d:.2f} m away"
             if crit is None and reached and not self._approachable(s):
                 crit = f"map estimate {d:.2f} m away, +- {s.horizontal_sigma_m:.2f} m"   # a machine: no elevation cue
             elif crit is None and reached:
@@ -423,9 +426,10 @@ class RescueBehaviour:
                     s, f"at source #{s.id} ({crit}), no voice yet (P(victim) {s.victim_probability:.2f})"):
                 return True
             # Never heard with speech from close up (where the beam hears a talking caller in most listens:
-            # README, "Voice evidence per listen"): only a mouth right below the array (the steep bearing) makes
-            # it a victim (one who knocks); a tight triangulation near rubble alone does not (measured,
-            # half_buried_slab seed 1: a voiceless reflection declared by its map estimate, 1.3 m from a victim).
+            # README, "Voice evidence per listen"): only a mouth below the array (a steep bearing, criteria 1-2)
+            # makes it a victim (a buried caller the VAD misses, one who knocks); a tight triangulation near
+            # rubble alone does not (measured, half_buried_slab seed 1: a voiceless reflection declared by its
+            # map estimate, 1.3 m from a victim).
             if not voiced and not steep_cue:
                 self._reject(s, f"reached ({crit}) but no voice heard (P(victim) {s.victim_probability:.2f})")
                 continue

@@ -200,6 +200,7 @@ class _Source:
 
 
 # ----------------------------------------------------------------------------- geometry
+LEVEL_RAY_RANGE_M = 3.0   # range guessed for a bearing that does not point down to the height prior
 DISTINCT_POSES_M = 0.15   # two listens at least this far apart (horizontally) are from different poses
 
 
@@ -214,11 +215,39 @@ def _crossing_deg(rays: Sequence[Listen]) -> float:
     (origins >= ``DISTINCT_POSES_M`` apart): how well their bearings cross, i.e. fix the range."""
     if len(rays) < 2:
         return 0.0
-    org = np.array([r.origin[:2] for r in rays])
-    az = np.array([math.atan2(r.direction[1], r.direction[0]) for r in rays])
-    apart = np.linalg.norm(org[:, None] - org[None], axis=-1) >= DISTINCT_POSES_M
+    return _crossing_of(np.array([r.origin for r in rays]), np.array([r.direction for r in rays]))
+
+
+def _crossing_of(o: np.ndarray, d: np.ndarray) -> float:
+    """``_crossing_deg`` of rays given as origins (n, 3) and directions (n, 3)."""
+    if len(o) < 2:
+        return 0.0
+    apart = np.linalg.norm(o[:, None, :2] - o[None, :, :2], axis=-1) >= DISTINCT_POSES_M
+    az = np.arctan2(d[:, 1], d[:, 0])
     cross = np.abs(_wrap(az[:, None] - az[None]))
     return float(np.degrees(np.max(np.where(apart, cross, 0.0))))
+
+
+def _along_mean_ray(o: np.ndarray, d: np.ndarray, cfg: SoundMapConfig) -> tuple[np.ndarray, np.ndarray]:
+    """Position and covariance of a source whose rays do not cross (heard from one place, or along one line):
+    on their mean ray at the height prior's range, at most 3 m, with a range 1-sigma as large as the range
+    (it is a guess) and the bearing noise across. Gauss-Newton on such rays has no range to converge to: from
+    six near-level rays of one pose it wandered to points 5-25 m away on any side (measured, behind_partition
+    seed 0: no inlier left, the caller never approached)."""
+    origin = o.mean(axis=0)
+    u = d.mean(axis=0)
+    u /= max(float(np.linalg.norm(u)), 1e-12)
+    # (a bearing a few degrees below level puts the height prior 2-15 m out: within the elevation noise of
+    # 8 deg, no range at all, so no guess beyond the level rays' one)
+    r = float(_on_prior_height(origin[None], u[None], cfg)[0] @ u - origin @ u)
+    r = min(max(r, cfg.min_range_m), LEVEL_RAY_RANGE_M)
+    p = origin + r * u
+    across = (r * math.tan(math.radians(cfg.bearing_sigma_deg))) ** 2 / len(o)
+    along = max(r, 1.0) ** 2
+    uu = np.outer(u, u)
+    cov = along * uu + across * (np.eye(3) - uu)
+    cov[2, 2] = max(cov[2, 2], cfg.source_height_sigma_m ** 2)
+    return p, cov
 
 
 def _angles(v: np.ndarray) -> tuple[np.ndarray, np.ndarray]:
@@ -282,6 +311,9 @@ def triangulate(origins, directions, cfg: SoundMapConfig = SoundMapConfig(),
     if not np.any(mask):
         mask = np.zeros(n, bool)
         mask[-1] = True
+    if _crossing_of(o[mask], d[mask]) < cfg.min_pair_angle_deg:
+        p, cov = _along_mean_ray(o[mask], d[mask], cfg)
+        return p, cov, _ray_angle(o, d, p[None])[0] <= math.radians(cfg.inlier_deg)
     p, cov = _refine(o[mask], d[mask], best, cfg)
     mask = _ray_angle(o, d, p[None])[0] <= math.radians(cfg.inlier_deg)
     if np.any(mask):
@@ -292,7 +324,8 @@ def triangulate(origins, directions, cfg: SoundMapConfig = SoundMapConfig(),
 def _on_prior_height(o: np.ndarray, d: np.ndarray, cfg: SoundMapConfig) -> np.ndarray:
     """Each ray continued to the prior source height (the elevation range cue); level rays to 3 m."""
     dz = cfg.source_height_m - o[:, 2]
-    t = np.where(d[:, 2] * dz > 1e-3 * np.abs(dz), dz / np.where(np.abs(d[:, 2]) > 1e-9, d[:, 2], 1e-9), 3.0)
+    t = np.where(d[:, 2] * dz > 1e-3 * np.abs(dz), dz / np.where(np.abs(d[:, 2]) > 1e-9, d[:, 2], 1e-9),
+                 LEVEL_RAY_RANGE_M)
     t = np.clip(t, 0.2, cfg.max_range_m)
     return o + t[:, None] * d
 
