@@ -206,8 +206,12 @@ DISTINCT_POSES_M = 0.15   # two listens at least this far apart (horizontally) a
 
 def _baseline(rays: Sequence[Listen]) -> float:
     """Largest horizontal distance (m) between two listening positions of ``rays``."""
-    org = np.array([r.origin[:2] for r in rays]).reshape(-1, 2)
-    return float(np.max(np.linalg.norm(org[:, None] - org[None], axis=-1))) if len(org) > 1 else 0.0
+    return _spread(np.array([r.origin for r in rays]).reshape(-1, 3))
+
+
+def _spread(o: np.ndarray) -> float:
+    """Largest horizontal distance (m) between two of the origins ``o`` (n, 3)."""
+    return float(np.max(np.linalg.norm(o[:, None, :2] - o[None, :, :2], axis=-1))) if len(o) > 1 else 0.0
 
 
 def _crossing_deg(rays: Sequence[Listen]) -> float:
@@ -229,9 +233,8 @@ def _crossing_of(o: np.ndarray, d: np.ndarray) -> float:
 
 
 def _along_mean_ray(o: np.ndarray, d: np.ndarray, cfg: SoundMapConfig) -> tuple[np.ndarray, np.ndarray]:
-    """Position and covariance of a source whose rays do not cross (heard from one place, or along one line):
-    on their mean ray at the height prior's range, at most 3 m, with a range 1-sigma as large as the range
-    (it is a guess) and the bearing noise across. Gauss-Newton on such rays has no range to converge to: from
+    """Position and covariance of a source heard from one place only: on its rays' mean at the height prior's
+    range, at most 3 m, with a range 1-sigma of at least 3 m (it is a guess) and the bearing noise across. Gauss-Newton on such rays has no range to converge to: from
     six near-level rays of one pose it wandered to points 5-25 m away on any side (measured, behind_partition
     seed 0: no inlier left, the caller never approached)."""
     origin = o.mean(axis=0)
@@ -243,7 +246,7 @@ def _along_mean_ray(o: np.ndarray, d: np.ndarray, cfg: SoundMapConfig) -> tuple[
     r = min(max(r, cfg.min_range_m), LEVEL_RAY_RANGE_M)
     p = origin + r * u
     across = (r * math.tan(math.radians(cfg.bearing_sigma_deg))) ** 2 / len(o)
-    along = max(r, 1.0) ** 2
+    along = max(r, LEVEL_RAY_RANGE_M) ** 2     # the range is a guess: the planner must know it
     uu = np.outer(u, u)
     cov = along * uu + across * (np.eye(3) - uu)
     cov[2, 2] = max(cov[2, 2], cfg.source_height_sigma_m ** 2)
@@ -311,7 +314,7 @@ def triangulate(origins, directions, cfg: SoundMapConfig = SoundMapConfig(),
     if not np.any(mask):
         mask = np.zeros(n, bool)
         mask[-1] = True
-    if _crossing_of(o[mask], d[mask]) < cfg.min_pair_angle_deg:
+    if _spread(o[mask]) < DISTINCT_POSES_M:   # all from one place: no parallax at all
         p, cov = _along_mean_ray(o[mask], d[mask], cfg)
         return p, cov, _ray_angle(o, d, p[None])[0] <= math.radians(cfg.inlier_deg)
     p, cov = _refine(o[mask], d[mask], best, cfg)
