@@ -86,6 +86,8 @@ class HearingConfig:
     vad_on_s: float = 0.5          # the chain listens vad_on_s in every vad_period_s (all tracks at once):
     vad_period_s: float = 1.0      # half the cost. Room cases (README, "Cost"): 0.5 s in 1 s as good as
                                    # continuous; 1 s in 2 s, 0.4 in 1, 0.5 in 1.5 or 0.5 in 2 fall short
+    credit_probability: float = 0.8   # CREDIT
+    inherit_deg: float = 20.0   # INHERIT
     beam_update_s: float = 0.5     # MPDR inverse covariance (and weights) refreshed every 0.5 s of listening
                                    # (1 s lost windows in the room cases; README, "Cost")
 
@@ -157,6 +159,7 @@ class Hearing:
         self._shares: dict[int, float] = {}   # _heard_share per block length
         self._gap = False          # blocks were skipped since the last listening block
         self._level: dict[int, float] = {}   # beam level (dB) per track id, last listening block
+        self._dir: dict[int, np.ndarray] = {}
 
     def update(self, block: np.ndarray, tracks: Sequence[Track], time: float) -> list[TrackEvidence]:
         cfg = self.config
@@ -193,9 +196,16 @@ class Hearing:
             return self._evidence(tracks, ids, time)
         memory = max(1, int(round(cfg.noise_memory_s / max(dt, StftStream.HOP / SAMPLE_RATE))))
         states = []
-        for i in ids:
+        self._dir = {k: v for k, v in self._dir.items() if k in self._state}
+        for i, u in zip(ids, directions):
             if i not in self._state:
-                self._state[i] = _TrackState(self.vad.new_stream(), NoiseFloor(memory), OverlapAdd(self._decimation))
+                new = _TrackState(self.vad.new_stream(), NoiseFloor(memory), OverlapAdd(self._decimation))
+                near = [(float(np.dot(u, self._dir[k])), k) for k in self._state if k in self._dir]
+                if near and cfg.inherit_deg > 0:
+                    c, k = max(near)
+                    if c >= math.cos(math.radians(cfg.inherit_deg)):
+                        new.log_odds = self._state[k].log_odds
+                self._state[i] = new
             states.append(self._state[i])
         floors = np.stack([st.noise.update_mean(m) for st, m in zip(states, mean_power)])   # (k, bins)
         weights = states[0].noise.gains(power, floors[:, None])
@@ -214,6 +224,7 @@ class Hearing:
         # stands above its noise floor: a talker leaks into a machine's beam (Silero hears speech far
         # below the noise), but there the machine dominates.
         n_speech = [int(np.count_nonzero(p >= SPEECH_THRESHOLD)) for p in probs]
+        n_sure = [int(np.count_nonzero(p >= cfg.credit_probability)) for p in probs]
         talking = [j for j, n in enumerate(n_speech) if n]
         owner = max(talking, key=lambda j: excess[j], default=None)
         # each frame heard stands for the frames not heard beside it
@@ -222,10 +233,11 @@ class Hearing:
         for j, (st, p, t) in enumerate(zip(states, probs, tracks)):
             st.frames += len(p)
             st.owned_speech += n_speech[j] if j == owner else 0
-            up = n_speech[j] * step_up if j == owner else 0.0
+            up = n_sure[j] * step_up if j == owner else 0.0
             # a pausing track's beam is heard (it may own speech) but its silence is no evidence
             down = (len(p) - n_speech[j]) * step_down if t.activity >= cfg.min_activity else 0.0
             st.log_odds = min(max(st.log_odds + up - down, -cfg.max_log_odds), cfg.max_log_odds)
+        self._dir.update(zip(ids, directions))
         return self._evidence(tracks, ids, time)
 
     def _heard_share(self, block: int) -> float:
