@@ -131,6 +131,31 @@ def test_a_dropped_track_is_forgotten_and_config_errors_name_the_field():
         Hearing(POS, 8000)
     with pytest.raises(ValueError, match="HearingConfig.vad_period_s"):
         HearingConfig(vad_on_s=1.0, vad_period_s=0.5)
+    with pytest.raises(ValueError, match="HearingConfig.credit_probability"):
+        HearingConfig(credit_probability=0.3)
+    with pytest.raises(ValueError, match="HearingConfig.inherit_deg"):
+        HearingConfig(inherit_deg=-1)
+
+
+def test_a_new_track_beside_a_known_one_starts_from_its_evidence():
+    """The tracker starts duplicates of one machine at other elevations: a new id within inherit_deg
+    (20 deg) of a NON_VOICE track starts NON_VOICE; one far from every track starts undecided."""
+    u = _unit(30)
+    rng = np.random.default_rng(5)
+    noise = plane_wave(POS, u, 0.05 * rng.standard_normal(3 * FS), FS)
+    h = Hearing(POS)
+    for k in range(20):   # 2 s of a steady source: NON_VOICE
+        ev = h.update(noise[:, k * BLOCK:(k + 1) * BLOCK], [_track(1, u, 1.0)], (k + 1) / 10)
+    assert classify(ev[0]) is VoiceClass.NON_VOICE
+    # a duplicate 12 deg above it and a track 90 deg away, both pausing (their silence lowers nothing)
+    tracks = [_track(1, u, 1.0), _track(2, _unit(30, 12), 0.1), _track(3, _unit(120), 0.1)]
+    ev = h.update(noise[:, 20 * BLOCK:21 * BLOCK], tracks, 2.1)
+    assert classify(ev[1]) is VoiceClass.NON_VOICE and ev[1].voice_probability <= ev[0].voice_probability + 0.05
+    assert ev[2].voice_probability == 0.5
+    off = Hearing(POS, config=HearingConfig(inherit_deg=0))
+    for k in range(21):
+        ev = off.update(noise[:, k * BLOCK:(k + 1) * BLOCK], tracks[:1] if k < 20 else tracks, (k + 1) / 10)
+    assert ev[1].voice_probability == 0.5
 
 
 # --- reverberant room: a talker and a real machine 6 dB louder ------------------------------------
