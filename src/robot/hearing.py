@@ -30,9 +30,9 @@ The filter (log-odds L of "this source is a human voice", prior L = 0, i.e. P = 
     ``fall_per_s`` x 0.032;
     speech heard in several beams in the same block counts only for the beam with the largest share
     of its power above its noise floor (the talker's own; a talker leaking into a machine's beam), and
-    of that beam's speech frames only those at VAD probability >= ``credit_probability`` (0.8) raise
-    L: speech leaking into a machine's beam is marginal (on the dev rooms 29-35 % of such frames reach
-    0.8, 81-86 % of a talker's own), and where her track is missing her beam cannot compete for it;
+    of that beam's speech frames only those at VAD probability >= ``credit_probability`` (0.75) raise
+    L: speech leaking into a machine's beam is marginal (on the dev rooms 37-48 % of such frames reach
+    0.75, 87-89 % of a talker's own), and where her track is missing her beam cannot compete for it;
   * a new track id within ``inherit_deg`` (20 deg) of a known track starts from that track's L: the
     tracker starts duplicate tracks of one machine at other elevations, which otherwise start undecided
     and, seldom active, never lose the prior;
@@ -92,10 +92,11 @@ class HearingConfig:
     vad_on_s: float = 0.5          # the chain listens vad_on_s in every vad_period_s (all tracks at once):
     vad_period_s: float = 1.0      # half the cost. Room cases (README, "Cost"): 0.5 s in 1 s as good as
                                    # continuous; 1 s in 2 s, 0.4 in 1, 0.5 in 1.5 or 0.5 in 2 fall short
-    credit_probability: float = 0.8   # only speech frames at this VAD probability or more raise P(voice): a
+    credit_probability: float = 0.75  # only speech frames at this VAD probability or more raise P(voice): a
                                       # talker leaking into a machine's beam is marginal speech (dev rooms,
-                                      # README "Telling a victim from a machine": 29-35 % of leaked speech
-                                      # frames reach 0.8, 81-86 % of her own)
+                                      # README "Telling a victim from a machine": 37-48 % of the speech
+                                      # frames in machines' beams reach 0.75, 87-89 % of hers; 0.7 / 0.8
+                                      # / 0.85 / 0.9 measured there)
     inherit_deg: float = 20.0   # a new track id within this of a known track starts from its log-odds, not
                                 # the prior: the tracker starts duplicates of one machine at other elevations
                                 # (0: off)
