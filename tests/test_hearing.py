@@ -135,6 +135,8 @@ def test_a_dropped_track_is_forgotten_and_config_errors_name_the_field():
         HearingConfig(credit_probability=0.3)
     with pytest.raises(ValueError, match="HearingConfig.inherit_deg"):
         HearingConfig(inherit_deg=-1)
+    with pytest.raises(ValueError, match="HearingConfig.settle_s"):
+        HearingConfig(settle_s=-0.5)
 
 
 def test_a_new_track_beside_a_known_one_starts_from_its_evidence():

@@ -97,6 +97,10 @@ class HearingConfig:
                                       # README "Telling a victim from a machine": 37-48 % of the speech
                                       # frames in machines' beams reach 0.75, 87-89 % of hers; 0.7 / 0.8
                                       # / 0.85 / 0.9 measured there)
+    settle_s: float = 1.0          # listening time (s) after the start before speech raises any P(voice): the
+                                   # MPDR covariance and noise floors are still filling, and the dev rooms'
+                                   # machines' beams owned her speech then (0.5 / 1 / 1.5 / 2 s measured:
+                                   # README, "Telling a victim from a machine")
     inherit_deg: float = 20.0   # a new track id within this of a known track starts from its log-odds, not
                                 # the prior: the tracker starts duplicates of one machine at other elevations
                                 # (0: off)
@@ -115,6 +119,8 @@ class HearingConfig:
             raise ValueError(f"HearingConfig.credit_probability: expected {SPEECH_THRESHOLD}..1, got {self.credit_probability}")
         if not 0 <= self.inherit_deg <= 180:
             raise ValueError(f"HearingConfig.inherit_deg: expected 0..180 deg, got {self.inherit_deg}")
+        if not self.settle_s >= 0:
+            raise ValueError(f"HearingConfig.settle_s: expected >= 0 s, got {self.settle_s}")
         for name in ("level_tau_s", "noise_memory_s", "vad_on_s", "beam_update_s"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"HearingConfig.{name}: expected > 0, got {getattr(self, name)}")
@@ -175,6 +181,7 @@ class Hearing:
         self._shares: dict[int, float] = {}   # _heard_share per block length
         self._gap = False          # blocks were skipped since the last listening block
         self._level: dict[int, float] = {}   # beam level (dB) per track id, last listening block
+        self._listened = 0.0       # s of audio listened to since the start (settle_s)
         self._dir: dict[int, np.ndarray] = {}   # unit direction per track id, last listening block
 
     def update(self, block: np.ndarray, tracks: Sequence[Track], time: float) -> list[TrackEvidence]:
@@ -198,6 +205,7 @@ class Hearing:
                 st.vad.pending = st.vad.pending[:0]
             self._gap = False
         dt = x.shape[-1] / SAMPLE_RATE
+        self._listened += dt
         directions = np.array([np.asarray(t.direction, float) for t in tracks]).reshape(-1, 3)
         beams = self.beamformer.process(self._stft.analyse(as_float_audio(x, np.float32)), directions)
         if not beams.shape[1]:
@@ -238,7 +246,7 @@ class Hearing:
         for j, (st, p, t) in enumerate(zip(states, probs, tracks)):
             st.frames += len(p)
             st.owned_speech += n_speech[j] if j == owner else 0
-            up = n_sure[j] * step_up if j == owner else 0.0
+            up = n_sure[j] * step_up if j == owner and self._listened > cfg.settle_s else 0.0
             # a pausing track's beam is heard (it may own speech) but its silence is no evidence
             down = (len(p) - n_speech[j]) * step_down if t.activity >= cfg.min_activity else 0.0
             st.log_odds = min(max(st.log_odds + up - down, -cfg.max_log_odds), cfg.max_log_odds)
