@@ -11,7 +11,8 @@ machines, other azimuths, robot position and simulation seed). For each localize
   1 s windows and the machine's NON_VOICE in all windows at SIR -6 dB; a VOICE track within 10 deg of her
   at SIR 0 dB (the issue's 90 / 95 / 70 % requirements).
 
-Prints a table per room and pooled, and one JSON line. ``--quick``: localizer columns only (no VAD).
+Prints a table per room and pooled, and one JSON line. ``--quick``: localizer columns only (no VAD);
+``--set`` / ``--hear FIELD=VALUE`` override ``LocalizerConfig`` / ``HearingConfig``.
 """
 from __future__ import annotations
 

@@ -36,6 +36,8 @@ The filter (log-odds L of "this source is a human voice", prior L = 0, i.e. P = 
   * a new track id within ``inherit_deg`` (20 deg) of a known track starts from that track's L: the
     tracker starts duplicate tracks of one machine at other elevations, which otherwise start undecided
     and, seldom active, never lose the prior;
+  * speech raises nothing in the first ``settle_s`` (1 s) of listening (MPDR covariance and noise floors
+    still filling);
   * a track that is not sounding (a pause) loses nothing: a victim who pauses stays a victim. Its beam
     is still heard: a talker beside a louder machine is detected in few windows, so her track's
     activity is often below 0.5 while she talks; when only sounding tracks were heard, her speech went
