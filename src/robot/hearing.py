@@ -118,7 +118,8 @@ class HearingConfig:
         if not self.max_gain_db >= 0:
             raise ValueError(f"HearingConfig.max_gain_db: expected >= 0 dB, got {self.max_gain_db}")
         if not SPEECH_THRESHOLD <= self.credit_probability <= 1:
-            raise ValueError(f"HearingConfig.credit_probability: expected {SPEECH_THRESHOLD}..1, got {self.credit_probability}")
+            raise ValueError(f"HearingConfig.credit_probability: expected {SPEECH_THRESHOLD}..1, "
+                             f"got {self.credit_probability}")
         if not 0 <= self.inherit_deg <= 180:
             raise ValueError(f"HearingConfig.inherit_deg: expected 0..180 deg, got {self.inherit_deg}")
         if not self.settle_s >= 0:
