@@ -131,6 +131,33 @@ def test_a_dropped_track_is_forgotten_and_config_errors_name_the_field():
         Hearing(POS, 8000)
     with pytest.raises(ValueError, match="HearingConfig.vad_period_s"):
         HearingConfig(vad_on_s=1.0, vad_period_s=0.5)
+    with pytest.raises(ValueError, match="HearingConfig.credit_probability"):
+        HearingConfig(credit_probability=0.3)
+    with pytest.raises(ValueError, match="HearingConfig.inherit_deg"):
+        HearingConfig(inherit_deg=-1)
+    with pytest.raises(ValueError, match="HearingConfig.settle_s"):
+        HearingConfig(settle_s=-0.5)
+
+
+def test_a_new_track_beside_a_known_one_starts_from_its_evidence():
+    """The tracker starts duplicates of one machine at other elevations: a new id within inherit_deg
+    (20 deg) of a NON_VOICE track starts NON_VOICE; one far from every track starts undecided."""
+    u = _unit(30)
+    rng = np.random.default_rng(5)
+    noise = plane_wave(POS, u, 0.05 * rng.standard_normal(3 * FS), FS)
+    h = Hearing(POS)
+    for k in range(20):   # 2 s of a steady source: NON_VOICE
+        ev = h.update(noise[:, k * BLOCK:(k + 1) * BLOCK], [_track(1, u, 1.0)], (k + 1) / 10)
+    assert classify(ev[0]) is VoiceClass.NON_VOICE
+    # a duplicate 12 deg above it and a track 90 deg away, both pausing (their silence lowers nothing)
+    tracks = [_track(1, u, 1.0), _track(2, _unit(30, 12), 0.1), _track(3, _unit(120), 0.1)]
+    ev = h.update(noise[:, 20 * BLOCK:21 * BLOCK], tracks, 2.1)
+    assert classify(ev[1]) is VoiceClass.NON_VOICE and ev[1].voice_probability <= ev[0].voice_probability + 0.05
+    assert ev[2].voice_probability == 0.5
+    off = Hearing(POS, config=HearingConfig(inherit_deg=0))
+    for k in range(21):
+        ev = off.update(noise[:, k * BLOCK:(k + 1) * BLOCK], tracks[:1] if k < 20 else tracks, (k + 1) / 10)
+    assert ev[1].voice_probability == 0.5
 
 
 # --- reverberant room: a talker and a real machine 6 dB louder ------------------------------------
@@ -219,9 +246,12 @@ def _chain_scores(sir_db):
 # within 10 deg of her in 2-56 of 124 windows at -6 dB SIR even with four peaks and no gate; pooled, her
 # track VOICE 33 %, machine NON_VOICE 81 %. With the rescan (bins weighted by their departure from the
 # recent spatial covariance and by their onset; tuned on other rooms, DEV_ROOM_CASES): her track VOICE
-# 50/86/36/100/36 % (pooled 61 %), the machine's NON_VOICE 93/43/50/100/100 % (pooled 77 %): she is
-# detected within 10 deg in only 2-69 % of her 128 ms windows (pooled 26 %), her track is missing or off
-# in many seconds, and where it is missing the machine's MPDR beam owns her leaked speech.
+# 50/86/36/100/36 % (pooled 61 %), the machine's NON_VOICE 93/43/50/100/100 % (pooled 77 %). With the
+# hearing's crediting rules (only speech frames at VAD p >= 0.75 raise P(voice), a duplicate track
+# inherits its neighbour's evidence, nothing in the first 1 s; chosen on DEV_ROOM_CASES): her track
+# VOICE unchanged (61 %), the machine's NON_VOICE 100/64/100/100/100 % (pooled 93 %). Her column is
+# bounded by her track, present in 57/100/36/100/36 % of her talking seconds (VOICE in 93 % of those):
+# she is detected within 10 deg in only 2-69 % of her 128 ms windows (pooled 26 %).
 # Strict xfail: when the chain meets the issue, it fails.
 @pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason="talker not localized beside a machine 6 dB louder (README figures)")
@@ -235,9 +265,9 @@ def test_real_chain_talker_is_voice_and_louder_machine_is_not_in_a_reverberant_r
     assert np.mean(sum((m for _, m, _ in rows), [])) >= 0.95, report
 
 
-# Measured: a VOICE track within 10 deg of her in 79/57/93/93/43 % of her windows per room, pooled 73 %
-# (43 % without the interference rescan, 63 % with it before the onset weight; README). Seeded simulation,
-# deterministic: 51 of her 70 windows, the threshold is 49 (a margin of 2 windows).
+# Measured: a VOICE track within 10 deg of her in 79/64/93/93/57 % of her windows per room, pooled 77 %
+# (43 % without the interference rescan, 63 % with it before the onset weight, 73 % before the hearing's
+# crediting rules; README). Seeded simulation, deterministic: 54 of her 70 windows, the threshold is 49.
 @pytest.mark.slow
 def test_real_chain_voice_track_within_10_deg_at_0_db_sir():
     rows = _chain_scores(0.0)

@@ -29,7 +29,15 @@ The filter (log-odds L of "this source is a human voice", prior L = 0, i.e. P = 
     >= 0.5); each non-speech frame of a SOUNDING track (activity >= ``min_activity``) subtracts
     ``fall_per_s`` x 0.032;
     speech heard in several beams in the same block counts only for the beam with the largest share
-    of its power above its noise floor (the talker's own; a talker leaking into a machine's beam);
+    of its power above its noise floor (the talker's own; a talker leaking into a machine's beam), and
+    of that beam's speech frames only those at VAD probability >= ``credit_probability`` (0.75) raise
+    L: speech leaking into a machine's beam is marginal (on the dev rooms 37-48 % of such frames reach
+    0.75, 87-89 % of a talker's own), and where her track is missing her beam cannot compete for it;
+  * a new track id within ``inherit_deg`` (20 deg) of a known track starts from that track's L: the
+    tracker starts duplicate tracks of one machine at other elevations, which otherwise start undecided
+    and, seldom active, never lose the prior;
+  * speech raises nothing in the first ``settle_s`` (1 s) of listening (MPDR covariance and noise floors
+    still filling);
   * a track that is not sounding (a pause) loses nothing: a victim who pauses stays a victim. Its beam
     is still heard: a talker beside a louder machine is detected in few windows, so her track's
     activity is often below 0.5 while she talks; when only sounding tracks were heard, her speech went
@@ -86,6 +94,18 @@ class HearingConfig:
     vad_on_s: float = 0.5          # the chain listens vad_on_s in every vad_period_s (all tracks at once):
     vad_period_s: float = 1.0      # half the cost. Room cases (README, "Cost"): 0.5 s in 1 s as good as
                                    # continuous; 1 s in 2 s, 0.4 in 1, 0.5 in 1.5 or 0.5 in 2 fall short
+    credit_probability: float = 0.75  # only speech frames at this VAD probability or more raise P(voice): a
+                                      # talker leaking into a machine's beam is marginal speech (dev rooms,
+                                      # README "Telling a victim from a machine": 37-48 % of the speech
+                                      # frames in machines' beams reach 0.75, 87-89 % of hers; 0.7 / 0.8
+                                      # / 0.85 / 0.9 measured there)
+    settle_s: float = 1.0          # listening time (s) after the start before speech raises any P(voice): the
+                                   # MPDR covariance and noise floors are still filling, and the dev rooms'
+                                   # machines' beams owned her speech then (0.5 / 1 / 1.5 / 2 s measured:
+                                   # README, "Telling a victim from a machine")
+    inherit_deg: float = 20.0   # a new track id within this of a known track starts from its log-odds, not
+                                # the prior: the tracker starts duplicates of one machine at other elevations
+                                # (0: off)
     beam_update_s: float = 0.5     # MPDR inverse covariance (and weights) refreshed every 0.5 s of listening
                                    # (1 s lost windows in the room cases; README, "Cost")
 
@@ -97,6 +117,13 @@ class HearingConfig:
             raise ValueError(f"HearingConfig.noise_min_gain: expected 0..1, got {self.noise_min_gain}")
         if not self.max_gain_db >= 0:
             raise ValueError(f"HearingConfig.max_gain_db: expected >= 0 dB, got {self.max_gain_db}")
+        if not SPEECH_THRESHOLD <= self.credit_probability <= 1:
+            raise ValueError(f"HearingConfig.credit_probability: expected {SPEECH_THRESHOLD}..1, "
+                             f"got {self.credit_probability}")
+        if not 0 <= self.inherit_deg <= 180:
+            raise ValueError(f"HearingConfig.inherit_deg: expected 0..180 deg, got {self.inherit_deg}")
+        if not self.settle_s >= 0:
+            raise ValueError(f"HearingConfig.settle_s: expected >= 0 s, got {self.settle_s}")
         for name in ("level_tau_s", "noise_memory_s", "vad_on_s", "beam_update_s"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"HearingConfig.{name}: expected > 0, got {getattr(self, name)}")
@@ -157,6 +184,8 @@ class Hearing:
         self._shares: dict[int, float] = {}   # _heard_share per block length
         self._gap = False          # blocks were skipped since the last listening block
         self._level: dict[int, float] = {}   # beam level (dB) per track id, last listening block
+        self._listened = 0.0       # s of audio listened to since the start (settle_s)
+        self._dir: dict[int, np.ndarray] = {}   # unit direction per track id, last listening block
 
     def update(self, block: np.ndarray, tracks: Sequence[Track], time: float) -> list[TrackEvidence]:
         cfg = self.config
@@ -166,10 +195,9 @@ class Hearing:
         listening = self._samples % self._period < self._on
         self._samples += x.shape[-1]
         ids = [int(t.id) for t in tracks]
-        for gone in set(self._state) - set(ids):
-            del self._state[gone]
-        for gone in set(self._level) - set(ids):
-            del self._level[gone]
+        for per_id in (self._state, self._level, self._dir):
+            for gone in set(per_id) - set(ids):
+                del per_id[gone]
         if not listening:
             self._stft.skip(as_float_audio(x[:, -StftStream.HOP:], np.float32))
             self._gap = True
@@ -180,6 +208,7 @@ class Hearing:
                 st.vad.pending = st.vad.pending[:0]
             self._gap = False
         dt = x.shape[-1] / SAMPLE_RATE
+        self._listened += dt
         directions = np.array([np.asarray(t.direction, float) for t in tracks]).reshape(-1, 3)
         beams = self.beamformer.process(self._stft.analyse(as_float_audio(x, np.float32)), directions)
         if not beams.shape[1]:
@@ -192,11 +221,8 @@ class Hearing:
         if not tracks:
             return self._evidence(tracks, ids, time)
         memory = max(1, int(round(cfg.noise_memory_s / max(dt, StftStream.HOP / SAMPLE_RATE))))
-        states = []
-        for i in ids:
-            if i not in self._state:
-                self._state[i] = _TrackState(self.vad.new_stream(), NoiseFloor(memory), OverlapAdd(self._decimation))
-            states.append(self._state[i])
+        states = [self._state.get(i) or self._new_state(u, memory) for i, u in zip(ids, directions)]
+        self._state.update(zip(ids, states))
         floors = np.stack([st.noise.update_mean(m) for st, m in zip(states, mean_power)])   # (k, bins)
         weights = states[0].noise.gains(power, floors[:, None])
         # share of each beam's power above its noise floor (an SNR: the talker's own beam, whose MPDR
@@ -214,6 +240,7 @@ class Hearing:
         # stands above its noise floor: a talker leaks into a machine's beam (Silero hears speech far
         # below the noise), but there the machine dominates.
         n_speech = [int(np.count_nonzero(p >= SPEECH_THRESHOLD)) for p in probs]
+        n_sure = [int(np.count_nonzero(p >= cfg.credit_probability)) for p in probs]   # what the owner's L gains
         talking = [j for j, n in enumerate(n_speech) if n]
         owner = max(talking, key=lambda j: excess[j], default=None)
         # each frame heard stands for the frames not heard beside it
@@ -222,11 +249,25 @@ class Hearing:
         for j, (st, p, t) in enumerate(zip(states, probs, tracks)):
             st.frames += len(p)
             st.owned_speech += n_speech[j] if j == owner else 0
-            up = n_speech[j] * step_up if j == owner else 0.0
+            up = n_sure[j] * step_up if j == owner and self._listened > cfg.settle_s else 0.0
             # a pausing track's beam is heard (it may own speech) but its silence is no evidence
             down = (len(p) - n_speech[j]) * step_down if t.activity >= cfg.min_activity else 0.0
             st.log_odds = min(max(st.log_odds + up - down, -cfg.max_log_odds), cfg.max_log_odds)
+        self._dir.update(zip(ids, directions))
         return self._evidence(tracks, ids, time)
+
+    def _new_state(self, direction: np.ndarray, memory: int) -> _TrackState:
+        """State of a new track id: its log-odds is that of the nearest known track within
+        ``inherit_deg`` (a duplicate of a source already heard: the tracker starts new ids on one machine
+        at other elevations, and from the prior they would be undecided until heard), else the prior 0."""
+        st = _TrackState(self.vad.new_stream(), NoiseFloor(memory), OverlapAdd(self._decimation))
+        if self._dir and self.config.inherit_deg > 0:
+            known = list(self._dir)
+            cos = np.array([self._dir[k] for k in known]) @ direction
+            j = int(np.argmax(cos))
+            if cos[j] >= math.cos(math.radians(self.config.inherit_deg)):
+                st.log_odds = self._state[known[j]].log_odds
+        return st
 
     def _heard_share(self, block: int) -> float:
         """Share of blocks of ``block`` samples that start inside the listening time, over a whole cycle
