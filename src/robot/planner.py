@@ -16,7 +16,8 @@ Frames: world/odometry frame (x, y in m). Inputs are the ``SoundMap``'s sources 
   then shortened to line-of-sight waypoints.
 * **exploration** (``explore_goal``): ``explore_headings`` points ``explore_distance_m`` away; the one with
   most unvisited floor around it, reachable, preferring directions away from found victims (their calls
-  mask fainter ones) and mapped interferers.
+  mask fainter ones) and mapped interferers. In a pocket of rubble where none of them is reachable by a short
+  path, the best unvisited reachable cell anywhere on the grid (frontier), its path length counted against it.
 """
 from __future__ import annotations
 
@@ -25,7 +26,7 @@ from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
-from scipy import sparse
+from scipy import ndimage, sparse
 from scipy.sparse.csgraph import dijkstra
 
 from robot.config_values import need
@@ -186,6 +187,10 @@ class Planner:
     def mark_unreachable(self, source_id: int, time: float) -> None:
         self._unreachable[source_id] = time
 
+    def clear_unreachable(self) -> None:
+        """The grid changed (obstacles forgotten): every source may be reachable again."""
+        self._unreachable.clear()
+
     def choose_target(self, sources: Sequence[MapSource], grid: OccupancyGrid, pose, time: float,
                       current: int | None = None) -> tuple[MapSource | None, Plan | None, str]:
         """The source to approach and the path to it, or (None, None, why)."""
@@ -254,6 +259,39 @@ class Planner:
                 continue
             if best is None or score > best[0]:
                 best = (score, plan, math.degrees(a))
-        if best is None:
-            return None, "no reachable unexplored direction"
-        return best[1], f"toward unvisited floor at {best[2]:.0f} deg (world), {best[0]:.2f} unvisited/away score"
+        if best is not None:
+            return best[1], f"toward unvisited floor at {best[2]:.0f} deg (world), {best[0]:.2f} unvisited/away score"
+        return self._frontier_goal(grid, (x, y), avoid, search)
+
+    def _frontier_goal(self, grid: OccupancyGrid, xy, avoid: Sequence[np.ndarray], search
+                       ) -> tuple[Plan | None, str]:
+        """No unvisited floor ``explore_distance_m`` away is reachable by a short path (a pocket of rubble):
+        the best unvisited reachable cell anywhere (frontier exploration, Yamauchi 1997), scored as in
+        ``explore_goal`` less the path length over ``distance_scale_m``, at least half
+        ``explore_distance_m`` away (a goal closer than that is a step into the robot's own footprint)."""
+        cfg = self.config
+        dist, _, idx, _ = search
+        reach = idx >= 0
+        reach[reach] = np.isfinite(dist[idx[reach]])
+        length = np.full(idx.shape, np.inf)
+        length[reach] = dist[idx[reach]]
+        size = 2 * int(round(1.0 / grid.resolution)) + 1   # the floor within 1 m, as in explore_goal
+        unvisited = (grid.visited == 0) & ~grid.blocked
+        score = ndimage.uniform_filter(unvisited.astype(float), size, mode="constant") \
+            - 3.0 * ndimage.uniform_filter(grid.occupied.astype(float), size, mode="constant")
+        centres = grid.origin + (np.indices(idx.shape).transpose(1, 2, 0) + 0.5) * grid.resolution
+        for p in avoid:
+            d = np.hypot(centres[..., 0] - p[0], centres[..., 1] - p[1]) - math.hypot(xy[0] - p[0], xy[1] - p[1])
+            score += 0.5 * np.clip(d / cfg.explore_distance_m, -1, 1)
+        ok = reach & unvisited & (length >= 0.5 * cfg.explore_distance_m)
+        if not ok.any():
+            return None, "no reachable unexplored floor on the learned grid"
+        utility = np.where(ok, score - length / cfg.distance_scale_m, -np.inf)
+        ij = np.unravel_index(int(np.argmax(utility)), utility.shape)
+        goal = grid.centre(ij)
+        plan = self.plan(grid, xy, goal, stop_radius=0.2, _search=search)
+        if plan is None:   # cannot happen for a reachable cell; kept for a clear answer
+            return None, "no reachable unexplored floor on the learned grid"
+        return plan, (f"no unvisited floor within {2 * cfg.explore_distance_m:g} m of path: frontier at "
+                      f"({goal[0]:.2f}, {goal[1]:.2f}), {plan.length:.2f} m of path, {score[ij]:.2f} unvisited/away "
+                      "score")

@@ -12,7 +12,8 @@ One cycle walks the data path, each stage in its own module:
   ``corroborated_elevation_deg`` and its level rose ``level_rise_db`` above the faintest listen of it, or
   (3) the map puts it within ``found_distance_m`` of the robot with a horizontal 1-sigma under
   ``found_sigma_m``, the bearing now points down and the level rose (supporting cues), or (4) the bumper fires while driving at it with its estimate within
-  ``bump_found_range_m`` and ``bump_ahead_deg`` of the motion (a victim under a slab cannot be reached).
+  ``bump_found_range_m`` and ``bump_ahead_deg`` of the motion and a voice was heard from it (a victim under a
+  slab cannot be reached).
   The reported position is the map's estimate; a found source stays found in the map (never declared again);
 * **plan** (``robot.planner``): the most useful unfound victim (P(victim), recency, path length; interferers
   never) and a path to it around the obstacles learned by touch (``robot.occupancy``); none mapped ->
@@ -20,8 +21,9 @@ One cycle walks the data path, each stage in its own module:
   silent listens when nothing is mapped, at once when only interferers are);
 * **move** (``robot.motion``): translate (the base is holonomic, the array omnidirectional: no turning) at
   most ``step_m`` along the path, then listen again. A contact (bumper, stall, gyro-detected slip) is
-  mapped, the robot backs off and the next cycle replans around it. "stuck" only when backing off and a
-  short move in each of four directions all fail.
+  mapped, the robot backs off and the next cycle replans around it. When the learned obstacles close every
+  way, those marked by a single contact are forgotten (clearing recovery) and the robot replans. "stuck" only
+  when backing off and a short move in each of four directions all fail.
 
 Frames: evidence in the array frame (axes the robot's, azimuth CCW from forward); poses, map and grid in
 the odometry frame (``start_pose`` sets it, e.g. to the world start pose in simulation). The drive is
@@ -487,6 +489,15 @@ class RescueBehaviour:
         plan, how = self.planner.explore_goal(self.grid, self.pose, avoid)
         if plan is None:
             self._emit(Decision.NO_TARGET, f"{why}; {how}")
+            n = self.grid.forget()
+            if n:
+                # Learned by touch, the grid can close every way out (contacts placed by drifting odometry,
+                # stalls on debris): forget what single contacts marked and replan after the next listen.
+                self.planner.clear_unreachable()
+                self.state = RescueState.RECOVER
+                self._emit(Decision.RECOVER, f"the learned obstacles close every way: {n} cell(s) marked by a single"
+                                             " contact forgotten (clearing recovery)", {"kind": "clear", "cells": n})
+                return
             self._escape("no reachable direction to explore")
             return
         self.state = RescueState.EXPLORE
@@ -557,9 +568,12 @@ class RescueBehaviour:
             x, y, _ = self.pose
             d = s.distance_to((x, y))
             off = abs(wrap_angle(math.atan2(s.position[1] - y, s.position[0] - x) - b.heading))
+            # A touch is no cue that a mouth is there (machines stand in rubble too: measured, dense_pump seed 0
+            # declared the pump found by bumping into the rubble beside it): only a source with a voice heard.
+            voiced = s.cls is SourceClass.VICTIM or any(r.voice_probability >= 0.5 for r in s.history)
             if d <= cfg.bump_found_range_m and off <= math.radians(cfg.bump_ahead_deg) \
                     and s.state is not SourceState.FOUND and self._approachable(s) and not self._near_found(s) \
-                    and s.horizontal_sigma_m <= 2 * cfg.found_sigma_m \
+                    and s.horizontal_sigma_m <= 2 * cfg.found_sigma_m and voiced \
                     and (s.cls is SourceClass.VICTIM or not self._near_machine(s)):
                 self._declare_found(s, f"bumped into it while approaching (estimate {d:.2f} m ahead, "
                                        f"{math.degrees(off):.0f} deg off the motion)")
