@@ -125,6 +125,10 @@ class RescueConfig:
     found_exclusion_m: float = 0.8         # a source this close to a found victim is that victim (the runner's
     #                                        success radius is 0.75 m: two victims closer are one find anyway)
     max_contacts_per_target: int = 3       # contacts while pursuing one source before it is set aside a while
+    max_baseline_steps: int = 4            # steps across one source's bearing that leave it untriangulated before it
+    #                                        is set aside a while (not heard again from the new poses: a reflection,
+    #                                        a caller gone quiet; measured, dense_pump seed 1 stepped to and fro
+    #                                        across a pump reflection's bearing for 100 s)
     machine_radius_m: float = 1.0          # within this of a rejected interferer, only a voice declares a victim
     reject_after_listens: int = 4          # listens of an interferer from close up before it is rejected (a caller
     #                                        calls in ~40 % of 1 s listens in the shipped scenarios: 4 silent ones
@@ -154,7 +158,7 @@ class RescueConfig:
         if not (isinstance(self.fatal_faults, tuple) and set(self.fatal_faults) <= set(FAULT_NAMES.values())):
             raise ValueError(f"RescueConfig.fatal_faults: expected drive fault names out of "
                              f"{sorted(FAULT_NAMES.values())} (an empty list for none), got {self.fatal_faults!r}")
-        for name in ("explore_after_silent", "max_contacts_per_target", "reject_after_listens"):
+        for name in ("explore_after_silent", "max_contacts_per_target", "max_baseline_steps", "reject_after_listens"):
             if getattr(self, name) < 1:
                 raise ValueError(f"RescueConfig.{name}: expected an integer >= 1, got {getattr(self, name)}")
         if self.max_victims is not None and self.max_victims < 1:
@@ -227,6 +231,7 @@ class RescueBehaviour:
         self._unheard_at: dict[int, int] = {}     # listens at a source's estimate that did not hear it
         self._cue: dict[int, str] = {}            # the found cue a source showed in an earlier listen
         self._target_contacts: dict[int, int] = {}
+        self._baseline_steps: dict[int, int] = {}
         self._side = 1.0                          # alternating side of baseline steps
         self._faults_seen: tuple[str, ...] = ()
         self._step_events: list[RescueEvent] = []
@@ -530,6 +535,14 @@ class RescueBehaviour:
         if total < 0.02 and target is not None and target.horizontal_sigma_m > cfg.found_sigma_m:
             # At the goal but the source's range is still open (heard only along one line): step across the
             # bearing for a baseline that triangulates it.
+            n = self._baseline_steps[target.id] = self._baseline_steps.get(target.id, 0) + 1
+            if n > cfg.max_baseline_steps:
+                self._baseline_steps[target.id] = 0
+                self.planner.mark_unreachable(target.id, self.clock.now())
+                self._emit(Decision.NO_TARGET, f"source #{target.id} still +- {target.horizontal_sigma_m:.2f} m after "
+                                               f"{cfg.max_baseline_steps} steps across its bearing: set aside a while",
+                           {"source": target.id})
+                return
             bearing = math.atan2(target.position[1] - y, target.position[0] - x)
             side = self._side
             self._side = -self._side
