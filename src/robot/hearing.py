@@ -103,6 +103,42 @@ class HearingConfig:
             raise ValueError(f"HearingConfig.min_activity: expected 0..1, got {self.min_activity}")
 
 
+def listen_beams(x: np.ndarray, mic_positions: np.ndarray, directions: np.ndarray,
+                 config: HearingConfig = HearingConfig(), chunks: int = 8) -> tuple[np.ndarray, np.ndarray]:
+    """The front end of ``Hearing`` on one standing listen (not a stream): 16 kHz audio ``x`` (n_mics, n) ->
+    ``(beams, excess)``: one beam per direction ((k, 3) unit vectors, array frame) at ``VAD_RATE``, (k, n // 2),
+    for the VAD, and per beam the share of its power above its noise floor (k,) (speech heard in several
+    beams is the talker's in the beam with the largest share, as in ``Hearing.update``).
+
+    MPDR beams below 4 kHz (covariance over this listen), stationary-noise suppression per beam (floor: the
+    least mean power of ``chunks`` equal parts of the listen, as ``NoiseFloor``'s minimum statistics over
+    its memory) with the lowest bin gain ``noise_min_gain``, then each beam scaled toward ``vad_level_db``
+    (at most ``max_gain_db``). Measured on a 30 s recording in dense_pump, 0.9 m from the mid-room caller
+    and 4.2 m from the pump (1 s listens, Silero, a listen counts as voice at >= 0.1 speech frames): her
+    beam was voice in 5 of 13 of her sounding seconds with this front end, in none with the plain
+    delay-and-sum beam (none either with delay-and-sum and the gain, or MPDR and the gain without the
+    suppression; 3 of 13 with delay-and-sum and the suppression); the pump's beam in 1 of 30 (0 of 30)."""
+    positions = np.asarray(mic_positions, float)
+    d = np.atleast_2d(np.asarray(directions, float))
+    spec = StftStream(len(positions), np.float32).analyse(np.asarray(x, np.float32))
+    n_frames = spec.shape[1]
+    if not len(d) or n_frames == 0:
+        return np.zeros((len(d), 0)), np.zeros(len(d))
+    listen_s = x.shape[-1] / SAMPLE_RATE
+    beams = MpdrBeamformer(positions, SAMPLE_RATE, memory_s=max(listen_s, 0.1), update_s=max(listen_s, 0.1),
+                           max_freq_hz=VAD_RATE / 2).process(spec, d)               # (k, frames, bins)
+    power = beams.real**2 + beams.imag**2
+    parts = np.array_split(np.arange(n_frames), min(chunks, n_frames))
+    floors = np.min([power[:, part].mean(axis=1) for part in parts], axis=0)       # (k, bins)
+    weights = NoiseFloor(1).gains(power, floors[:, None])
+    excess = (power * weights).sum(axis=(1, 2)) / np.maximum(power.sum(axis=(1, 2)), 1e-30)
+    decimation = SAMPLE_RATE // VAD_RATE
+    clean = OverlapAdd.synthesise_all([OverlapAdd(decimation) for _ in d], beams * np.maximum(weights,
+                                                                                     config.noise_min_gain))
+    gain_db = np.minimum(config.vad_level_db - level_db(clean, axis=-1), config.max_gain_db)
+    return clean * 10 ** (gain_db[:, None] / 20), excess
+
+
 class VoiceClass(enum.Enum):
     VOICE = "voice"
     NON_VOICE = "non_voice"

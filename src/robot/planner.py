@@ -16,8 +16,8 @@ Frames: world/odometry frame (x, y in m). Inputs are the ``SoundMap``'s sources 
   then shortened to line-of-sight waypoints.
 * **exploration** (``explore_goal``): ``explore_headings`` points ``explore_distance_m`` away; the one with
   most unvisited floor around it, reachable, preferring directions away from found victims (their calls
-  mask fainter ones) and mapped interferers. In a pocket of rubble where none of them is reachable by a short
-  path, the best unvisited reachable cell anywhere on the grid (frontier), its path length counted against it.
+  mask fainter ones) and mapped interferers; or, when that is better once path lengths are counted against both,
+  the best unvisited reachable cell anywhere on the grid (frontier: the way out of a covered pocket of rubble).
 """
 from __future__ import annotations
 
@@ -259,16 +259,24 @@ class Planner:
                 continue
             if best is None or score > best[0]:
                 best = (score, plan, math.degrees(a))
-        if best is not None:
+        far, far_why = self._frontier_goal(grid, (x, y), avoid, search)
+        # The ring's best against the best unvisited cell anywhere, each worth its score over (1 + path length /
+        # distance_scale_m) as a target is: in a pocket of rubble whose floor is covered the ring offers only
+        # visited floor (measured, dense_pump: the robot circled its start for 100-250 s), the way out leads on.
+        if best is not None and (far is None or self._worth(best[0], best[1].length) >= far[1]):
             return best[1], f"toward unvisited floor at {best[2]:.0f} deg (world), {best[0]:.2f} unvisited/away score"
-        return self._frontier_goal(grid, (x, y), avoid, search)
+        if far is None:
+            return None, far_why
+        return far[0], far_why
+
+    def _worth(self, score, length):
+        return np.maximum(score, 0.0) / (1.0 + length / self.config.distance_scale_m)
 
     def _frontier_goal(self, grid: OccupancyGrid, xy, avoid: Sequence[np.ndarray], search
-                       ) -> tuple[Plan | None, str]:
-        """No unvisited floor ``explore_distance_m`` away is reachable by a short path (a pocket of rubble):
-        the best unvisited reachable cell anywhere (frontier exploration, Yamauchi 1997), scored as in
-        ``explore_goal`` less the path length over ``distance_scale_m``, at least half
-        ``explore_distance_m`` away (a goal closer than that is a step into the robot's own footprint)."""
+                       ) -> tuple[tuple[Plan, float] | None, str]:
+        """The best unvisited reachable cell anywhere (frontier exploration, Yamauchi 1997) at least
+        ``explore_distance_m`` along the path, scored as the ring's goals, worth that score (if positive) over
+        (1 + path length / ``distance_scale_m``): ``((plan, worth), why)`` or ``(None, why)``."""
         cfg = self.config
         dist, _, idx, _ = search
         reach = idx >= 0
@@ -283,15 +291,16 @@ class Planner:
         for p in avoid:
             d = np.hypot(centres[..., 0] - p[0], centres[..., 1] - p[1]) - math.hypot(xy[0] - p[0], xy[1] - p[1])
             score += 0.5 * np.clip(d / cfg.explore_distance_m, -1, 1)
-        ok = reach & unvisited & (length >= 0.5 * cfg.explore_distance_m)
+        ok = reach & unvisited & (length >= cfg.explore_distance_m)
         if not ok.any():
-            return None, "no reachable unexplored floor on the learned grid"
-        utility = np.where(ok, score - length / cfg.distance_scale_m, -np.inf)
+            return None, "no reachable unexplored direction or floor on the learned grid"
+        utility = np.where(ok, self._worth(score, np.where(ok, length, 0.0)), -np.inf)
         ij = np.unravel_index(int(np.argmax(utility)), utility.shape)
+        if not utility[ij] > 0:
+            return None, "no reachable unexplored direction or floor on the learned grid"
         goal = grid.centre(ij)
         plan = self.plan(grid, xy, goal, stop_radius=0.2, _search=search)
         if plan is None:   # cannot happen for a reachable cell; kept for a clear answer
-            return None, "no reachable unexplored floor on the learned grid"
-        return plan, (f"no unvisited floor within {2 * cfg.explore_distance_m:g} m of path: frontier at "
-                      f"({goal[0]:.2f}, {goal[1]:.2f}), {plan.length:.2f} m of path, {score[ij]:.2f} unvisited/away "
-                      "score")
+            return None, "no reachable unexplored direction or floor on the learned grid"
+        return (plan, float(utility[ij])), (f"toward the unvisited floor at ({goal[0]:.2f}, {goal[1]:.2f}) (frontier),"
+                                            f" {plan.length:.2f} m of path, {score[ij]:.2f} unvisited/away score")
