@@ -64,7 +64,7 @@ def grid_graph(free: np.ndarray, res: float) -> tuple[sparse.csr_matrix, np.ndar
 class PlannerConfig:
     recency_s: float = 60.0            # a source unheard this long counts 1/e as much
     distance_scale_m: float = 3.0      # path length that halves a target's utility
-    keep_factor: float = 1.5           # the current target's utility is multiplied by this
+    keep_factor: float = 1.5           # the current target's (and frontier goal's) utility is multiplied by this
     sigma_scale_m: float = 0.5         # position uncertainty (1 sigma) that halves a target's utility
     stale_s: float = 45.0              # a source not classified victim and unheard this long is no target
     max_sigma_m: float = 20.0          # not a target while more uncertain (a bearing above the horizon: no range)
@@ -105,6 +105,7 @@ class Planner:
     def __init__(self, config: PlannerConfig = PlannerConfig()) -> None:
         self.config = config
         self._unreachable: dict[int, float] = {}   # source id -> time its plan failed
+        self._frontier: np.ndarray | None = None    # the frontier cell being explored toward (world x, y)
 
     # -- paths ----------------------------------------------------------------------------
     def distances(self, grid: OccupancyGrid, start_xy) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
@@ -179,10 +180,15 @@ class Planner:
         d = float(np.hypot(*v))
         if s.horizontal_sigma_m <= cfg.probe_sigma_m or d < 1e-9:
             return s.position[:2].copy()
-        # 30 deg off the bearing: closer, and across it, so that the next bearings cross this one.
-        a = math.atan2(v[1], v[0]) + math.radians(cfg.probe_angle_deg)
-        step = min(d, cfg.probe_distance_m)
-        return xy + step * np.array([math.cos(a), math.sin(a)])
+        # Its range is unknown: the estimate's distance means little (an estimate 0.2 m away +- 5 m drew the
+        # robot 0.2 m at a time for 60 s: dense_pump seed 0, rays steep above the horizon). Along the last
+        # ray heard (world frame, from where it was heard), probe_distance_m from here, 30 deg off it: across
+        # the bearing, so that the next bearings cross this one.
+        u = np.asarray(s.history[-1].direction[:2], float) if s.history else v
+        if float(np.hypot(*u)) < 1e-6:
+            u = v
+        a = math.atan2(u[1], u[0]) + math.radians(cfg.probe_angle_deg)
+        return xy + cfg.probe_distance_m * np.array([math.cos(a), math.sin(a)])
 
     def mark_unreachable(self, source_id: int, time: float) -> None:
         self._unreachable[source_id] = time
@@ -264,6 +270,7 @@ class Planner:
         # distance_scale_m) as a target is: in a pocket of rubble whose floor is covered the ring offers only
         # visited floor (measured, dense_pump: the robot circled its start for 100-250 s), the way out leads on.
         if best is not None and (far is None or self._worth(best[0], best[1].length) >= far[1]):
+            self._frontier = None
             return best[1], f"toward unvisited floor at {best[2]:.0f} deg (world), {best[0]:.2f} unvisited/away score"
         if far is None:
             return None, far_why
@@ -292,15 +299,26 @@ class Planner:
             d = np.hypot(centres[..., 0] - p[0], centres[..., 1] - p[1]) - math.hypot(xy[0] - p[0], xy[1] - p[1])
             score += 0.5 * np.clip(d / cfg.explore_distance_m, -1, 1)
         ok = reach & unvisited & (length >= cfg.explore_distance_m)
-        if not ok.any():
-            return None, "no reachable unexplored direction or floor on the learned grid"
         utility = np.where(ok, self._worth(score, np.where(ok, length, 0.0)), -np.inf)
         ij = np.unravel_index(int(np.argmax(utility)), utility.shape)
+        # The frontier goal chosen before, while still unvisited, reachable and not reached, counts keep_factor
+        # times (as the current target does): without it the robot turned back and forth between frontiers as
+        # each step changed their path lengths (measured, dense_pump seed 1: 100 s between two of them).
+        kept = self._frontier
+        self._frontier = None
+        if kept is not None:
+            k = grid.cell(kept)
+            if grid.inside(k) and reach[k] and unvisited[k] and length[k] > 0.3:
+                worth = float(self._worth(score[k], length[k])) * cfg.keep_factor
+                if worth > 0 and not worth < utility[ij]:
+                    ij = k
+                    utility[k] = worth
         if not utility[ij] > 0:
             return None, "no reachable unexplored direction or floor on the learned grid"
         goal = grid.centre(ij)
         plan = self.plan(grid, xy, goal, stop_radius=0.2, _search=search)
         if plan is None:   # cannot happen for a reachable cell; kept for a clear answer
             return None, "no reachable unexplored direction or floor on the learned grid"
+        self._frontier = goal
         return (plan, float(utility[ij])), (f"toward the unvisited floor at ({goal[0]:.2f}, {goal[1]:.2f}) (frontier),"
                                             f" {plan.length:.2f} m of path, {score[ij]:.2f} unvisited/away score")
