@@ -23,7 +23,7 @@ One cycle walks the data path, each stage in its own module:
   most ``step_m`` along the path, then listen again. A contact (bumper, stall, gyro-detected slip) is
   mapped, the robot backs off and the next cycle replans around it. When the learned obstacles close every
   way, those marked by a single contact are forgotten (clearing recovery) and the robot replans. "stuck" only
-  when backing off and a short move in each of four directions all fail.
+  when backing off and a short move in each of eight directions all fail.
 
 Frames: evidence in the array frame (axes the robot's, azimuth CCW from forward); poses, map and grid in
 the odometry frame (``start_pose`` sets it, e.g. to the world start pose in simulation). The drive is
@@ -623,10 +623,11 @@ class RescueBehaviour:
             return False
 
     def _escape(self, why: str) -> None:
-        """Try a short move in four directions; "stuck" only when every one is blocked."""
+        """Try a short move in eight directions (the four axes, then the diagonals: wedged between debris pieces
+        the robot may pass between them); "stuck" only when every one is blocked."""
         yaw = float(self.pose[2])
-        for k in range(4):
-            heading = k * math.pi / 2
+        for k in (0, 2, 4, 6, 1, 3, 5, 7):
+            heading = k * math.pi / 4
             try:
                 self.motion.translate(heading, self.motion.config.backoff_m, self.motion.config.recover_speed,
                                       arm_bumper_on_release=True)
@@ -637,7 +638,7 @@ class RescueBehaviour:
                 if b.kind == "fault":
                     return
                 self.grid.mark_contact(self.pose, yaw + heading, b.kind)
-        self._finish(Decision.STUCK, f"{why}; a move in each of four directions was blocked")
+        self._finish(Decision.STUCK, f"{why}; a move in each of eight directions was blocked")
 
     # -- helpers ----------------------------------------------------------------------
     def _bearing_to(self, position) -> tuple[float, float]:
