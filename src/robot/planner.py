@@ -180,15 +180,10 @@ class Planner:
         d = float(np.hypot(*v))
         if s.horizontal_sigma_m <= cfg.probe_sigma_m or d < 1e-9:
             return s.position[:2].copy()
-        # Its range is unknown: the estimate's distance means little (an estimate 0.2 m away +- 5 m drew the
-        # robot 0.2 m at a time for 60 s: dense_pump seed 0, rays steep above the horizon). Along the last
-        # ray heard (world frame, from where it was heard), probe_distance_m from here, 30 deg off it: across
-        # the bearing, so that the next bearings cross this one.
-        u = np.asarray(s.history[-1].direction[:2], float) if s.history else v
-        if float(np.hypot(*u)) < 1e-6:
-            u = v
-        a = math.atan2(u[1], u[0]) + math.radians(cfg.probe_angle_deg)
-        return xy + cfg.probe_distance_m * np.array([math.cos(a), math.sin(a)])
+        # 30 deg off the bearing: closer, and across it, so that the next bearings cross this one.
+        a = math.atan2(v[1], v[0]) + math.radians(cfg.probe_angle_deg)
+        step = min(d, cfg.probe_distance_m)
+        return xy + step * np.array([math.cos(a), math.sin(a)])
 
     def mark_unreachable(self, source_id: int, time: float) -> None:
         self._unreachable[source_id] = time

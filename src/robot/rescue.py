@@ -12,8 +12,8 @@ One cycle walks the data path, each stage in its own module:
   ``corroborated_elevation_deg`` and its level rose ``level_rise_db`` above the faintest listen of it, or
   (3) the map puts it within ``found_distance_m`` of the robot with a horizontal 1-sigma under
   ``found_sigma_m``, the bearing now points down and the level rose (supporting cues), or (4) the bumper fires while driving at it with its estimate within
-  ``bump_found_range_m`` and ``bump_ahead_deg`` of the motion and a voice was heard from it (a victim under a
-  slab cannot be reached).
+  ``bump_found_range_m`` and ``bump_ahead_deg`` of the motion, a voice was heard from it and its last bearing
+  pointed ``supporting_elevation_deg`` down (a victim under a slab cannot be reached).
   The reported position is the map's estimate; a found source stays found in the map (never declared again);
 * **plan** (``robot.planner``): the most useful unfound victim (P(victim), recency, path length; interferers
   never) and a path to it around the obstacles learned by touch (``robot.occupancy``); none mapped ->
@@ -581,12 +581,16 @@ class RescueBehaviour:
             x, y, _ = self.pose
             d = s.distance_to((x, y))
             off = abs(wrap_angle(math.atan2(s.position[1] - y, s.position[0] - x) - b.heading))
-            # A touch is no cue that a mouth is there (machines stand in rubble too: measured, dense_pump seed 0
-            # declared the pump found by bumping into the rubble beside it): only a source with a voice heard.
+            # A touch is no cue that a mouth is there: rubble stands beside machines and mirror images too
+            # (measured: dense_pump seed 0 declared the pump found by bumping into the rubble beside it, light
+            # rubble seed 7 a caller's reflection 1.8 m from her, heard last at -6 deg). Only a source with a
+            # voice heard, last heard pointing down as a mouth on the floor within reach does.
             voiced = s.cls is SourceClass.VICTIM or any(r.voice_probability >= 0.5 for r in s.history)
+            down = bool(s.history) and -math.degrees(math.asin(max(-1.0, min(1.0, s.history[-1].direction[2])))) \
+                >= cfg.supporting_elevation_deg
             if d <= cfg.bump_found_range_m and off <= math.radians(cfg.bump_ahead_deg) \
                     and s.state is not SourceState.FOUND and self._approachable(s) and not self._near_found(s) \
-                    and s.horizontal_sigma_m <= 2 * cfg.found_sigma_m and voiced \
+                    and s.horizontal_sigma_m <= 2 * cfg.found_sigma_m and voiced and down \
                     and (s.cls is SourceClass.VICTIM or not self._near_machine(s)):
                 self._declare_found(s, f"bumped into it while approaching (estimate {d:.2f} m ahead, "
                                        f"{math.degrees(off):.0f} deg off the motion)")
