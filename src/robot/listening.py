@@ -3,9 +3,10 @@
 This is the hearing stage of the rescue data path (hearing -> sound map -> planner -> behaviour -> motion)
 fed by per-window detections: each detection of the listen becomes one ``ListenEvidence`` (array frame,
 ``track_id`` None) whose ``voice_probability`` is the Silero VAD (``robot.vad``) on a beam toward it: the
-front end of ``robot.hearing`` (MPDR, stationary-noise suppression, gain: ``listen_beams``) on the listen. The sound map accumulates these per source over listens, which is what a
-tracker + ``robot.hearing.Hearing`` would do per track; a tracker can replace the per-window detections
-without changing the map's interface (``robot.sound_map.BearingEvidence``).
+front end of ``robot.hearing`` (MPDR, stationary-noise suppression, gain: ``listen_beams``) on the listen.
+The sound map accumulates these per source over listens, which is what a tracker + ``robot.hearing.Hearing``
+would do per track; a tracker can replace the per-window detections without changing the map's interface
+(``robot.sound_map.BearingEvidence``).
 
 Per-listen voice probability: ``VOICE_P`` when the beam's speech-frame fraction reaches ``voice_threshold``,
 else ``NON_VOICE_P``. Asymmetric, as in ``robot.hearing``: speech frames are rare but decisive (the VAD
