@@ -68,8 +68,13 @@ def worker(paths: list[str], seeds: list[int], workers: int, out: str) -> None:
 
 
 # ----------------------------------------------------------------------------- driver side
-def _scenario_paths(tmp: Path, old: bool) -> list[str]:
+def _scenario_paths(tmp: Path, old: bool, only: list[str] | None = None) -> list[str]:
     names = SCENARIOS + [n for n in OPTIONAL if (ROOT / "scenarios" / f"{n}.toml").exists()]
+    if only:
+        unknown = sorted(set(only) - set(names))
+        if unknown:
+            raise SystemExit(f"bench_rescue.py: --scenarios: unknown {unknown}, expected some of {names}")
+        names = [n for n in names if n in only]
     out = []
     for n in names:
         src = ROOT / "scenarios" / f"{n}.toml"
@@ -141,6 +146,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--baseline-src", default=None,
                     help="or the src directory of a checkout of the old behaviour (with its models/, data/ beside)")
     ap.add_argument("--workers", type=int, default=2)
+    ap.add_argument("--scenarios", default=None, help="comma list of scenario names (default: all shipped ones)")
     ap.add_argument("--rows-out", default=None, help="also write every run's row (JSON) here")
     ap.add_argument("--rows-in", nargs="*", default=(), help="rows files of earlier runs to add to the tables")
     ap.add_argument("--worker", default=None, help=argparse.SUPPRESS)
@@ -155,7 +161,9 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
         # Both versions at once (each with ``workers`` processes): the same seeds, the same scenario files.
-        jobs = {"new": _start_version(ROOT / "src", _scenario_paths(tmp, old=False), seeds, args.workers, tmp, "new")}
+        only = args.scenarios.split(",") if args.scenarios else None
+        jobs = {"new": _start_version(ROOT / "src", _scenario_paths(tmp, old=False, only=only), seeds, args.workers,
+                                      tmp, "new")}
         old_paths: list[str] = []
         if args.baseline or args.baseline_src:
             if args.baseline_src:
@@ -168,7 +176,7 @@ def main(argv: list[str] | None = None) -> int:
                                       capture_output=True).stdout
                 subprocess.run(["tar", "-x", "-C", str(base)], input=arch, check=True)
                 base_src = base / "src"
-            old_paths = _scenario_paths(tmp, old=True)
+            old_paths = _scenario_paths(tmp, old=True, only=only)
             jobs["old"] = _start_version(base_src, old_paths, seeds, args.workers, tmp, "old")
         try:
             rows = {tag: _finish(*job) for tag, job in jobs.items()}

@@ -275,3 +275,34 @@ def test_real_chain_voice_track_within_10_deg_at_0_db_sir():
     print("real chain, SIR 0 dB: a VOICE track within 10 deg of her, share of her 1 s windows:", report,
           "pooled", round(float(np.mean(sum((n for _, _, n in rows), []))), 2))
     assert np.mean(sum((n for _, _, n in rows), [])) >= 0.7, report
+
+
+# --- one standing listen (robot.listening): the same chain on 1 s, fresh each listen -------------------------
+def test_one_listen_hears_the_talker_beside_a_louder_machine_and_gives_the_machine_no_voice():
+    """The five real-recording rooms above (machine 6 dB louder, 2 m, RT60 0.6 s), cut into 1 s listens as the
+    rescue behaviour makes them, beams at the true directions: the listener's chain (``speech_fractions``: MPDR,
+    noise suppression, gain, speech owned by one beam) hears her where the plain delay-and-sum beam does not,
+    and gives the machine's beam no speech (README, "Voice evidence per listen")."""
+    from robot.hearing import speech_fractions
+    from robot.vad import SileroVad, speech_fraction
+    from ssl_core.beamform import beam_signal
+    vad8, vad16 = SileroVad(sample_rate=8000), SileroVad()
+    talker = machine = listens = talking_s = ds_talker = 0
+    for case in ROOM_CASES:
+        x, directions, she_talks = _room(*case)
+        x = x.astype(float) / 32768.0
+        for k, talks in enumerate(she_talks[: x.shape[1] // FS]):
+            block = x[:, k * FS:(k + 1) * FS]
+            f = speech_fractions(block, POS, np.array(directions), vad8)
+            listens += 1
+            machine += f[1] >= 0.1
+            if talks:
+                talking_s += 1
+                talker += f[0] >= 0.1
+                ds = beam_signal(block, POS, directions[0], FS)
+                ds_talker += speech_fraction(vad16.probabilities(ds, FS)) >= 0.1
+    print("one listen: her beam voice in", talker, "of", talking_s, "talking seconds (delay-and-sum", ds_talker,
+          "); the machine's in", machine, "of", listens)
+    assert talker >= 0.9 * talking_s, (talker, talking_s)
+    assert machine <= 0.05 * listens, (machine, listens)
+    assert talker >= ds_talker + 0.5 * talking_s, (talker, ds_talker, talking_s)

@@ -89,8 +89,61 @@ def test_explore_goes_to_unvisited_floor_away_from_found_victims():
     assert goal[0] > -0.3 and goal[1] > -0.3           # not back along the path, not toward the found victim
 
 
+def test_a_stall_alone_is_no_obstacle_two_are_and_forget_drops_single_contacts():
+    g = OccupancyGrid()
+    c = g.mark_contact((1.0, 1.0, 0.0), 0.0, "stall")
+    assert not g.occupied[g.cell(c)]                 # wheels stall on debris they could cross
+    g.mark_contact((1.0, 1.0, 0.0), 0.0, "stall")
+    assert g.occupied[g.cell(c)]                     # stalled twice at one place: an obstacle
+    b = g.mark_contact((-1.0, -1.0, 0.0), math.pi, "bumper")
+    assert g.occupied[g.cell(b)]                     # one bumper press is
+    g.mark_contact((3.0, 0.0, 0.0), 0.0, "bumper")
+    twice = g.mark_contact((3.0, 0.0, 0.0), 0.0, "bumper")
+    assert g.forget() > 0
+    assert not g.occupied[g.cell(b)] and not g.occupied[g.cell(c)]
+    assert g.occupied[g.cell(twice)]                 # confirmed by two presses: kept
+
+
+def _pocket():
+    """A room-like pocket around (0, 0) learned by bumper presses: walls 0.5 m away on three sides and a
+    wall 0.5 m north with a gap; beyond the gap a 3 m corridor leads north. Truth: the only way out is the gap
+    at x in [0.9, 1.5] on y = 0.5."""
+    g = OccupancyGrid(OccupancyConfig(size_m=12.0))
+    for t in np.arange(-0.6, 1.61, 0.1):
+        for _ in range(3):
+            g.mark_contact((t, -0.5 + 0.17), -math.pi / 2)        # south wall y = -0.5
+            if not 0.8 <= t <= 1.6:
+                g.mark_contact((t, 0.5 - 0.17), math.pi / 2)      # north wall, gap at x 0.8-1.6
+    for t in np.arange(-0.5, 0.51, 0.1):
+        for _ in range(3):
+            g.mark_contact((-0.7 + 0.17, t), math.pi)             # west wall x = -0.7
+            g.mark_contact((1.7 - 0.17, t), 0.0)                  # east wall x = 1.7
+    for t in np.arange(0.5, 3.51, 0.1):
+        for _ in range(3):
+            g.mark_contact((0.7 + 0.17, t), math.pi)              # corridor walls x = 0.7 and 1.7
+            g.mark_contact((1.7 - 0.17, t), 0.0)
+    for x in np.arange(-0.5, 1.51, 0.1):                         # the pocket's floor has been covered
+        g.mark_path((x, -0.2), (x, 0.2))
+    return g
+
+
+def test_explore_leaves_a_covered_pocket_through_its_only_gap():
+    g = _pocket()
+    pl = Planner(PlannerConfig(explore_distance_m=1.2))
+    plan, why = pl.explore_goal(g, (0.0, 0.0, 0.0))
+    assert plan is not None, why
+    pts = np.vstack([[0.0, 0.0], plan.waypoints])
+    assert plan.waypoints[-1][1] > 0.5                                 # out of the pocket, north
+    for a, b in zip(pts[:-1], pts[1:]):                                # through the gap, never a wall
+        if (a[1] - 0.5) * (b[1] - 0.5) < 0:
+            x = a[0] + (0.5 - a[1]) * (b[0] - a[0]) / (b[1] - a[1])
+            assert 0.8 + 0.16 <= x <= 1.6 - 0.16
+
+
 def test_config_errors_name_the_field():
     with pytest.raises(ValueError, match="keep_factor"):
         PlannerConfig(keep_factor=0.5)
     with pytest.raises(ValueError, match="resolution_m"):
         OccupancyConfig(resolution_m=0)
+    with pytest.raises(ValueError, match="stall_log_odds"):
+        OccupancyConfig(stall_log_odds=3.0)

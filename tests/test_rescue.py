@@ -277,7 +277,7 @@ def test_stuck_only_when_every_direction_is_blocked():
     w.drive = Jammed(w, (0.0, 0.0, 0.0))
     b = make(w)
     ev = b.run(max_time=60.0)
-    assert b.done and ev[-1].decision is Decision.STUCK and "four directions" in ev[-1].reason
+    assert b.done and ev[-1].decision is Decision.STUCK and "eight directions" in ev[-1].reason
     # jammed only for the first move: the back-off succeeds, so no "stuck", and the caller is found
     w2 = World([Source((3.0, 0.0, 0.1), 65.0)])
     w2.drive = Jammed(w2, (0.0, 0.0, 0.0))

@@ -6,7 +6,9 @@ pose by default), at ``resolution_m``; cells hold log-odds of "an obstacle (for 
 
 * a **contact** (bumper, stall, slip) at the robot's pose while moving along ``heading`` marks a short
   obstacle face: the cells ``contact_width_m`` wide across the heading, just beyond the bumper
-  (``robot_radius_m``) -- the bumper is a ring, so the contact is somewhere on its front arc;
+  (``robot_radius_m``) -- the bumper is a ring, so the contact is somewhere on its front arc; a bumper press
+  makes an obstacle at once, a stall only when repeated (wheels stall on debris they could cross);
+* ``forget`` (clearing recovery) drops the obstacles that a single contact made when they close every way;
 * the robot's **footprint** along its path is free (log-odds lowered; the footprint is where it was, so
   nothing blocking is there at the robot's height);
 * ``visited`` counts footprint coverage (for exploration).
@@ -32,7 +34,10 @@ class OccupancyConfig:
     size_m: float = 20.0             # grid side (shipped rooms are <= 7 m; the start may be in a corner)
     robot_radius_m: float = 0.16     # bumper radius (ssl_sim robot model; the real chassis matches)
     contact_width_m: float = 0.3     # width of the obstacle face marked by one contact (~ the bumper's front arc)
-    hit_log_odds: float = 2.0        # per contact (one contact makes a cell occupied: p = 0.88)
+    hit_log_odds: float = 2.0        # per bumper contact (one makes a cell occupied: p = 0.88)
+    stall_log_odds: float = 0.6      # per stall or gyro-detected slip: half of them are no obstacle (measured in
+    #                                  dense_pump seeds 0-2: 7 of 12 stalls 0.3-0.5 m from any obstacle, wheels on
+    #                                  debris; bumper presses all within 0.2 m): two at one place make an obstacle
     free_log_odds: float = -0.4      # per footprint pass (five passes outweigh one contact)
     occupied_log_odds: float = 1.0   # a cell at or above this is an obstacle
     max_log_odds: float = 6.0
@@ -43,6 +48,7 @@ class OccupancyConfig:
         need(self, self.robot_radius_m > 0, "robot_radius_m", "> 0 m")
         need(self, self.contact_width_m > 0, "contact_width_m", "> 0 m")
         need(self, self.hit_log_odds > 0, "hit_log_odds", "> 0")
+        need(self, 0 < self.stall_log_odds <= self.hit_log_odds, "stall_log_odds", "in (0, hit_log_odds]")
         need(self, self.free_log_odds < 0, "free_log_odds", "< 0")
         need(self, 0 < self.occupied_log_odds <= self.max_log_odds, "occupied_log_odds", "in (0, max_log_odds]")
 
@@ -102,8 +108,10 @@ class OccupancyGrid:
 
     def mark_contact(self, pose, heading: float, why: str = "bump") -> np.ndarray:
         """A contact while moving along ``heading`` (rad, world frame) at ``pose`` (x, y[, yaw]):
-        marks the obstacle face ahead; returns its centre (world m)."""
+        marks the obstacle face ahead; returns its centre (world m). ``why``: "stall" and "slip" (the wheels
+        made no progress) weigh ``stall_log_odds``, anything else (a bumper press) ``hit_log_odds``."""
         cfg = self.config
+        hit = cfg.stall_log_odds if why in ("stall", "slip") else cfg.hit_log_odds
         x, y = float(pose[0]), float(pose[1])
         u = np.array([math.cos(heading), math.sin(heading)])
         n = np.array([-u[1], u[0]])
@@ -112,10 +120,24 @@ class OccupancyGrid:
         cells = {self.cell(centre + s * n) for s in np.linspace(-0.5, 0.5, k + 1) * cfg.contact_width_m}
         for ij in cells:
             if self.inside(ij):
-                self.log_odds[ij] = min(self.log_odds[ij] + cfg.hit_log_odds, cfg.max_log_odds)
+                self.log_odds[ij] = min(self.log_odds[ij] + hit, cfg.max_log_odds)
         self.contacts.append((float(centre[0]), float(centre[1]), why))
         self._blocked = None
         return centre
+
+    def forget(self) -> int:
+        """Clearing recovery (as ROS navigation's costmap reset when no plan exists): take one contact's worth of
+        evidence (``hit_log_odds``) off every obstacle cell, so that cells marked by a single contact become
+        unknown again and cells confirmed by repeated contacts stay. Touch is an unsure sensor in rubble: a
+        contact is placed by drifting odometry (measured 0.1-0.3 m after 100 s of bumping in dense_pump) and
+        a stall can be a wheel on debris, not an obstacle; a ring of such marks closes the robot in for good.
+        Returns how many cells stopped being obstacles."""
+        cfg = self.config
+        before = self.occupied
+        pos = self.log_odds > 0
+        self.log_odds[pos] = np.maximum(self.log_odds[pos] - cfg.hit_log_odds, 0.0)
+        self._blocked = None
+        return int(np.count_nonzero(before & ~self.occupied))
 
     # -- reading --------------------------------------------------------------------------
     @property

@@ -16,7 +16,8 @@ Frames: world/odometry frame (x, y in m). Inputs are the ``SoundMap``'s sources 
   then shortened to line-of-sight waypoints.
 * **exploration** (``explore_goal``): ``explore_headings`` points ``explore_distance_m`` away; the one with
   most unvisited floor around it, reachable, preferring directions away from found victims (their calls
-  mask fainter ones) and mapped interferers.
+  mask fainter ones) and mapped interferers; or, when that is better once path lengths are counted against both,
+  the best unvisited reachable cell anywhere on the grid (frontier: the way out of a covered pocket of rubble).
 """
 from __future__ import annotations
 
@@ -25,7 +26,7 @@ from dataclasses import dataclass
 from typing import Sequence
 
 import numpy as np
-from scipy import sparse
+from scipy import ndimage, sparse
 from scipy.sparse.csgraph import dijkstra
 
 from robot.config_values import need
@@ -63,7 +64,7 @@ def grid_graph(free: np.ndarray, res: float) -> tuple[sparse.csr_matrix, np.ndar
 class PlannerConfig:
     recency_s: float = 60.0            # a source unheard this long counts 1/e as much
     distance_scale_m: float = 3.0      # path length that halves a target's utility
-    keep_factor: float = 1.5           # the current target's utility is multiplied by this
+    keep_factor: float = 1.5           # the current target's (and frontier goal's) utility is multiplied by this
     sigma_scale_m: float = 0.5         # position uncertainty (1 sigma) that halves a target's utility
     stale_s: float = 45.0              # a source not classified victim and unheard this long is no target
     max_sigma_m: float = 20.0          # not a target while more uncertain (a bearing above the horizon: no range)
@@ -104,6 +105,7 @@ class Planner:
     def __init__(self, config: PlannerConfig = PlannerConfig()) -> None:
         self.config = config
         self._unreachable: dict[int, float] = {}   # source id -> time its plan failed
+        self._frontier: np.ndarray | None = None    # the frontier cell being explored toward (world x, y)
 
     # -- paths ----------------------------------------------------------------------------
     def distances(self, grid: OccupancyGrid, start_xy) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
@@ -186,6 +188,10 @@ class Planner:
     def mark_unreachable(self, source_id: int, time: float) -> None:
         self._unreachable[source_id] = time
 
+    def clear_unreachable(self) -> None:
+        """The grid changed (obstacles forgotten): every source may be reachable again."""
+        self._unreachable.clear()
+
     def choose_target(self, sources: Sequence[MapSource], grid: OccupancyGrid, pose, time: float,
                       current: int | None = None) -> tuple[MapSource | None, Plan | None, str]:
         """The source to approach and the path to it, or (None, None, why)."""
@@ -254,6 +260,60 @@ class Planner:
                 continue
             if best is None or score > best[0]:
                 best = (score, plan, math.degrees(a))
-        if best is None:
-            return None, "no reachable unexplored direction"
-        return best[1], f"toward unvisited floor at {best[2]:.0f} deg (world), {best[0]:.2f} unvisited/away score"
+        far, far_why = self._frontier_goal(grid, (x, y), avoid, search)
+        # The ring's best against the best unvisited cell anywhere, each worth its score over (1 + path length /
+        # distance_scale_m) as a target is: in a pocket of rubble whose floor is covered the ring offers only
+        # visited floor (measured, dense_pump: the robot circled its start for 100-250 s), the way out leads on.
+        if best is not None and (far is None or self._worth(best[0], best[1].length) >= far[1]):
+            self._frontier = None
+            return best[1], f"toward unvisited floor at {best[2]:.0f} deg (world), {best[0]:.2f} unvisited/away score"
+        if far is None:
+            return None, far_why
+        return far[0], far_why
+
+    def _worth(self, score, length):
+        return np.maximum(score, 0.0) / (1.0 + length / self.config.distance_scale_m)
+
+    def _frontier_goal(self, grid: OccupancyGrid, xy, avoid: Sequence[np.ndarray], search
+                       ) -> tuple[tuple[Plan, float] | None, str]:
+        """The best unvisited reachable cell anywhere (frontier exploration, Yamauchi 1997) at least
+        ``explore_distance_m`` along the path, scored as the ring's goals, worth that score (if positive) over
+        (1 + path length / ``distance_scale_m``): ``((plan, worth), why)`` or ``(None, why)``."""
+        cfg = self.config
+        dist, _, idx, _ = search
+        reach = idx >= 0
+        reach[reach] = np.isfinite(dist[idx[reach]])
+        length = np.full(idx.shape, np.inf)
+        length[reach] = dist[idx[reach]]
+        size = 2 * int(round(1.0 / grid.resolution)) + 1   # the floor within 1 m, as in explore_goal
+        unvisited = (grid.visited == 0) & ~grid.blocked
+        score = ndimage.uniform_filter(unvisited.astype(float), size, mode="constant") \
+            - 3.0 * ndimage.uniform_filter(grid.occupied.astype(float), size, mode="constant")
+        centres = grid.origin + (np.indices(idx.shape).transpose(1, 2, 0) + 0.5) * grid.resolution
+        for p in avoid:
+            d = np.hypot(centres[..., 0] - p[0], centres[..., 1] - p[1]) - math.hypot(xy[0] - p[0], xy[1] - p[1])
+            score += 0.5 * np.clip(d / cfg.explore_distance_m, -1, 1)
+        ok = reach & unvisited & (length >= cfg.explore_distance_m)
+        utility = np.where(ok, self._worth(score, np.where(ok, length, 0.0)), -np.inf)
+        ij = np.unravel_index(int(np.argmax(utility)), utility.shape)
+        # The frontier goal chosen before, while still unvisited, reachable and not reached, counts keep_factor
+        # times (as the current target does): without it the robot turned back and forth between frontiers as
+        # each step changed their path lengths (measured, dense_pump seed 1: 100 s between two of them).
+        kept = self._frontier
+        self._frontier = None
+        if kept is not None:
+            k = grid.cell(kept)
+            if grid.inside(k) and reach[k] and unvisited[k] and length[k] > 0.3:
+                worth = float(self._worth(score[k], length[k])) * cfg.keep_factor
+                if worth > 0 and not worth < utility[ij]:
+                    ij = k
+                    utility[k] = worth
+        if not utility[ij] > 0:
+            return None, "no reachable unexplored direction or floor on the learned grid"
+        goal = grid.centre(ij)
+        plan = self.plan(grid, xy, goal, stop_radius=0.2, _search=search)
+        if plan is None:   # cannot happen for a reachable cell; kept for a clear answer
+            return None, "no reachable unexplored direction or floor on the learned grid"
+        self._frontier = goal
+        return (plan, float(utility[ij])), (f"toward the unvisited floor at ({goal[0]:.2f}, {goal[1]:.2f}) (frontier),"
+                                            f" {plan.length:.2f} m of path, {score[ij]:.2f} unvisited/away score")

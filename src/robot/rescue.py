@@ -12,8 +12,9 @@ One cycle walks the data path, each stage in its own module:
   ``corroborated_elevation_deg`` and its level rose ``level_rise_db`` above the faintest listen of it, or
   (3) the map puts it within ``found_distance_m`` of the robot with a horizontal 1-sigma under
   ``found_sigma_m``, the bearing now points down and the level rose (supporting cues), or (4) the bumper fires while driving at it with its estimate within
-  ``bump_found_range_m`` and ``bump_ahead_deg`` of the motion, heard within ``bump_heard_within_s`` (a victim
-  under a slab cannot be reached).
+  ``bump_found_range_m`` and ``bump_ahead_deg`` of the motion, a voice was heard from it, it was heard within
+  ``bump_heard_within_s`` and its last bearing pointed ``supporting_elevation_deg`` down (a victim under a
+  slab cannot be reached).
   The reported position is the map's estimate; a found source stays found in the map (never declared again);
 * **plan** (``robot.planner``): the most useful unfound victim (P(victim), recency, path length; interferers
   never) and a path to it around the obstacles learned by touch (``robot.occupancy``); none mapped ->
@@ -21,8 +22,9 @@ One cycle walks the data path, each stage in its own module:
   silent listens when nothing is mapped, at once when only interferers are);
 * **move** (``robot.motion``): translate (the base is holonomic, the array omnidirectional: no turning) at
   most ``step_m`` along the path, then listen again. A contact (bumper, stall, gyro-detected slip) is
-  mapped, the robot backs off and the next cycle replans around it. "stuck" only when backing off and a
-  short move in each of four directions all fail.
+  mapped, the robot backs off and the next cycle replans around it. When the learned obstacles close every
+  way, those marked by a single contact are forgotten (clearing recovery) and the robot replans. "stuck" only
+  when backing off and a short move in each of eight directions all fail.
 
 Frames: evidence in the array frame (axes the robot's, azimuth CCW from forward); poses, map and grid in
 the odometry frame (``start_pose`` sets it, e.g. to the world start pose in simulation). The drive is
@@ -127,6 +129,10 @@ class RescueConfig:
     found_exclusion_m: float = 0.8         # a source this close to a found victim is that victim (the runner's
     #                                        success radius is 0.75 m: two victims closer are one find anyway)
     max_contacts_per_target: int = 3       # contacts while pursuing one source before it is set aside a while
+    max_baseline_steps: int = 4            # steps across one source's bearing that leave it untriangulated before it
+    #                                        is set aside a while (not heard again from the new poses: a reflection,
+    #                                        a caller gone quiet; measured, dense_pump seed 1 stepped to and fro
+    #                                        across a pump reflection's bearing for 100 s)
     machine_radius_m: float = 1.0          # within this of a rejected interferer, only a voice declares a victim
     reject_after_listens: int = 4          # listens of an interferer from close up before it is rejected (a caller
     #                                        calls in ~40 % of 1 s listens in the shipped scenarios: 4 silent ones
@@ -157,7 +163,7 @@ class RescueConfig:
         if not (isinstance(self.fatal_faults, tuple) and set(self.fatal_faults) <= set(FAULT_NAMES.values())):
             raise ValueError(f"RescueConfig.fatal_faults: expected drive fault names out of "
                              f"{sorted(FAULT_NAMES.values())} (an empty list for none), got {self.fatal_faults!r}")
-        for name in ("explore_after_silent", "max_contacts_per_target", "reject_after_listens"):
+        for name in ("explore_after_silent", "max_contacts_per_target", "max_baseline_steps", "reject_after_listens"):
             if getattr(self, name) < 1:
                 raise ValueError(f"RescueConfig.{name}: expected an integer >= 1, got {getattr(self, name)}")
         if self.max_victims is not None and self.max_victims < 1:
@@ -231,6 +237,7 @@ class RescueBehaviour:
         self._cue: dict[int, tuple[str, bool]] = {}   # the found cue a source showed in an earlier listen (and
         #                                                whether it was a steep bearing)
         self._target_contacts: dict[int, int] = {}
+        self._baseline_steps: dict[int, int] = {}
         self._side = 1.0                          # alternating side of baseline steps
         self._faults_seen: tuple[str, ...] = ()
         self._step_events: list[RescueEvent] = []
@@ -505,6 +512,15 @@ class RescueBehaviour:
         plan, how = self.planner.explore_goal(self.grid, self.pose, avoid)
         if plan is None:
             self._emit(Decision.NO_TARGET, f"{why}; {how}")
+            n = self.grid.forget()
+            if n:
+                # Learned by touch, the grid can close every way out (contacts placed by drifting odometry,
+                # stalls on debris): forget what single contacts marked and replan after the next listen.
+                self.planner.clear_unreachable()
+                self.state = RescueState.RECOVER
+                self._emit(Decision.RECOVER, f"the learned obstacles close every way: {n} cell(s) marked by a single"
+                                             " contact forgotten (clearing recovery)", {"kind": "clear", "cells": n})
+                return
             self._escape("no reachable direction to explore")
             return
         self.state = RescueState.EXPLORE
@@ -537,6 +553,14 @@ class RescueBehaviour:
         if total < 0.02 and target is not None and target.horizontal_sigma_m > cfg.found_sigma_m:
             # At the goal but the source's range is still open (heard only along one line): step across the
             # bearing for a baseline that triangulates it.
+            n = self._baseline_steps[target.id] = self._baseline_steps.get(target.id, 0) + 1
+            if n > cfg.max_baseline_steps:
+                self._baseline_steps[target.id] = 0
+                self.planner.mark_unreachable(target.id, self.clock.now())
+                self._emit(Decision.NO_TARGET, f"source #{target.id} still +- {target.horizontal_sigma_m:.2f} m after "
+                                               f"{cfg.max_baseline_steps} steps across its bearing: set aside a while",
+                           {"source": target.id})
+                return
             bearing = math.atan2(target.position[1] - y, target.position[0] - x)
             side = self._side
             self._side = -self._side
@@ -575,9 +599,16 @@ class RescueBehaviour:
             x, y, _ = self.pose
             d = s.distance_to((x, y))
             off = abs(wrap_angle(math.atan2(s.position[1] - y, s.position[0] - x) - b.heading))
+            # A touch is no cue that a mouth is there: rubble stands beside machines and mirror images too
+            # (measured: dense_pump seed 0 declared the pump found by bumping into the rubble beside it, light
+            # rubble seed 7 a caller's reflection 1.8 m from her, heard last at -6 deg). Only a source with a
+            # voice heard, last heard pointing down as a mouth on the floor within reach does.
+            voiced = s.cls is SourceClass.VICTIM or any(r.voice_probability >= 0.5 for r in s.history)
+            down = bool(s.history) and -math.degrees(math.asin(max(-1.0, min(1.0, s.history[-1].direction[2])))) \
+                >= cfg.supporting_elevation_deg
             if d <= cfg.bump_found_range_m and off <= math.radians(cfg.bump_ahead_deg) \
                     and s.state is not SourceState.FOUND and self._approachable(s) and not self._near_found(s) \
-                    and s.horizontal_sigma_m <= 2 * cfg.found_sigma_m \
+                    and s.horizontal_sigma_m <= 2 * cfg.found_sigma_m and voiced and down \
                     and self.clock.now() - s.last_time <= cfg.bump_heard_within_s \
                     and (s.cls is SourceClass.VICTIM or not self._near_machine(s)):
                 self._declare_found(s, f"bumped into it while approaching (estimate {d:.2f} m ahead, "
@@ -615,10 +646,11 @@ class RescueBehaviour:
             return False
 
     def _escape(self, why: str) -> None:
-        """Try a short move in four directions; "stuck" only when every one is blocked."""
+        """Try a short move in eight directions (the four axes, then the diagonals: wedged between debris pieces
+        the robot may pass between them); "stuck" only when every one is blocked."""
         yaw = float(self.pose[2])
-        for k in range(4):
-            heading = k * math.pi / 2
+        for k in (0, 2, 4, 6, 1, 3, 5, 7):
+            heading = k * math.pi / 4
             try:
                 self.motion.translate(heading, self.motion.config.backoff_m, self.motion.config.recover_speed,
                                       arm_bumper_on_release=True)
@@ -629,7 +661,7 @@ class RescueBehaviour:
                 if b.kind == "fault":
                     return
                 self.grid.mark_contact(self.pose, yaw + heading, b.kind)
-        self._finish(Decision.STUCK, f"{why}; a move in each of four directions was blocked")
+        self._finish(Decision.STUCK, f"{why}; a move in each of eight directions was blocked")
 
     # -- helpers ----------------------------------------------------------------------
     def _bearing_to(self, position) -> tuple[float, float]:
