@@ -294,10 +294,11 @@ class Hearing:
 
 
 def speech_fractions(samples: np.ndarray, mic_positions: np.ndarray, directions: np.ndarray,
-                     vad: SileroVad | None = None, block_s: float = 0.1) -> np.ndarray:
+                     vad: SileroVad | None = None, sample_rate: int = SAMPLE_RATE, block_s: float = 0.1) -> np.ndarray:
     """One listen standing still: per direction (k, 3) (unit vectors, array frame; ``mic_positions``
     (n_mics, 3) m), the share of 32 ms frames in which the VAD hears speech owned by that direction's
-    beam -> (k,). ``samples`` (n_mics, n) int16 or float full scale 1 at 16 kHz.
+    beam -> (k,). ``samples`` (n_mics, n) int16 or float full scale 1 at ``sample_rate``, which must be 16 kHz
+    (the ``Hearing`` chain's; ValueError otherwise).
 
     The streaming chain of ``Hearing`` (MPDR beams, noise suppression, gain, Silero, speech credited to
     the beam that owns it) on a fresh state, listening all the time, fed ``block_s`` at a time with
@@ -308,7 +309,7 @@ def speech_fractions(samples: np.ndarray, mic_positions: np.ndarray, directions:
     d = np.asarray(directions, float).reshape(-1, 3)
     if not len(d):
         return np.zeros(0)
-    hearing = Hearing(mic_positions, config=HearingConfig(vad_on_s=1.0, vad_period_s=1.0, beam_update_s=block_s),
+    hearing = Hearing(mic_positions, sample_rate, HearingConfig(vad_on_s=1.0, vad_period_s=1.0, beam_update_s=block_s),
                       vad=vad)
     tracks = [Track(i, u, np.zeros(3), 1.0, 0.0, 0.0, 0.0, 0.0, 0) for i, u in enumerate(d)]
     x = as_float_audio(samples)
