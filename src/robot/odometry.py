@@ -119,7 +119,7 @@ def fit_translation(wheel_increments, yaw_increment: float, params: OmniDrivePar
         raise ValueError(f"wheel_increments: expected 3 wheel-angle increments (rad), got shape {dth.shape}")
     j = params.jacobian
     a, c = j[:, :2], dth - j[:, 2] * yaw_increment        # rim equations: a @ (dx, dy) = c
-    misfit = float(forward_kinematics(dth, params)[2]) - yaw_increment
+    misfit = float(forward_kinematics(dth, params)[2] - yaw_increment)
     if abs(misfit) <= slip_yaw:
         return TranslationFit(np.linalg.lstsq(a, c, rcond=None)[0], misfit, None)
     if commanded_increments is None or not np.any(commanded_increments):
@@ -236,7 +236,7 @@ class Odometry:
                 step[2] = (float(yaw_rate) - self._bias) * dt
                 fit = fit_translation(increments, step[2], self.params, commanded, self.gyro.slip_rate * dt)
                 step[:2] = fit.translation
-                self.slipping = abs(fit.misfit) > self.gyro.slip_rate * dt
+                self.slipping = bool(abs(fit.misfit) > self.gyro.slip_rate * dt)
                 self.slip_intervals += self.slipping
             if dt > 0:
                 self._moving_intervals = self._moving_intervals + 1 if commanded is not None else 0
