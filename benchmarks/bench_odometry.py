@@ -42,7 +42,8 @@ def main(argv=None) -> int:
         print(f"{r['seed']:>4} {r['bumper_recoveries']:>5} {r['heading_error_deg']:>11.2f} "
               f"{r['position_error_m']:>6.3f} {r['wheels_heading_error_deg']:>10.2f} "
               f"{r['wheels_position_error_m']:>8.3f} {r['gyro_bias_deg_s']:>10.4f} "
-              f"{r['gyro_bias_estimate_deg_s']:>8.4f} {r['bias_updates']:>5} {r['slip_intervals']:>5} {r['held_intervals']:>5} "
+              f"{r['gyro_bias_estimate_deg_s']:>8.4f} {r['bias_updates']:>5} {r['slip_intervals']:>5} "
+              f"{r['held_intervals']:>5} "
               f"{r['cpu_s']:>6.1f}")
     met = all(r["heading_error_deg"] <= 3.0 and r["position_error_m"] <= 0.3 for r in rows)
     print(f"target (<= 3 deg and <= 0.3 m on every seed): {'met' if met else 'NOT met'}")

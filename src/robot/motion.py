@@ -87,11 +87,13 @@ class Motion:
         self.drive.stop()
         self._command = (0.0, 0.0, 0.0)
 
-    def update_odometry(self, stationary: bool = False):
-        """Read encoders and gyro into the odometry with the command held since the last reading (it tells a
-        slipping wheel from gripping ones, and a push from travel); ``stationary``: the drive stands as commanded
-        (every primitive has stopped it), so the odometry may learn the gyro's bias (zero-velocity update)."""
-        return self.odometry.update(self.drive.odometry(), self.drive.status().yaw_rate, stationary, self._command)
+    def update_odometry(self, stationary: bool = False, command=None):
+        """Read encoders and gyro into the odometry with the command held since the last reading (``command``, else
+        the one the drive holds now: it tells a slipping wheel from gripping ones, and a push from travel);
+        ``stationary``: the drive stands as commanded (every primitive has stopped it), so the odometry may learn
+        the gyro's bias (zero-velocity update)."""
+        held = self._command if command is None else command
+        return self.odometry.update(self.drive.odometry(), self.drive.status().yaw_rate, stationary, held)
 
     def stand(self, seconds: float) -> None:
         """Stand still (drive stopped) for ``seconds``, reading the odometry every control tick: the braking
@@ -114,8 +116,9 @@ class Motion:
         elif self._slips >= self.config.slip_intervals:
             kind = "slip"
         if kind is not None:
+            held = self._command                # the reading below covers the interval driven under it
             self._stop()
-            self.update_odometry()
+            self.update_odometry(command=held)
             raise Blocked(kind, st, heading_world)
 
     def _tick_odometry(self):

@@ -115,7 +115,8 @@ class TranslationFit(NamedTuple):
 def single_slip_translations(wheel_increments, yaw_increment: float,
                              params: OmniDriveParams = OmniDriveParams()) -> np.ndarray:
     """Row k: the body translation (dx, dy; m, robot frame) if wheel k slipped, from the other two wheels' angle
-    increments (rad) and the heading increment ``yaw_increment`` (rad): two rim equations, two unknowns. Shape (3, 2)."""
+    increments (rad) and the heading increment ``yaw_increment`` (rad): two rim equations, two unknowns.
+    Shape (3, 2)."""
     dth = np.asarray(wheel_increments, dtype=float)
     if dth.shape != (3,):
         raise ValueError(f"wheel_increments: expected 3 wheel-angle increments (rad), got shape {dth.shape}")
@@ -223,7 +224,8 @@ class Odometry:
         if command is not None:
             cmd = np.asarray(command, dtype=float)
             if cmd.shape != (3,) or not np.all(np.isfinite(cmd)):
-                raise ValueError(f"command: expected a finite body twist (vx m/s, vy m/s, omega rad/s), got {command!r}")
+                raise ValueError(
+                    f"command: expected a finite body twist (vx m/s, vy m/s, omega rad/s), got {command!r}")
             wheel_command = twist_to_wheels(cmd, self.params)     # what the drive turns the wheels at (rad/s)
         speeds = np.asarray(reading.wheel_speeds, dtype=float)
         if self._last_angles is not None:
