@@ -255,7 +255,7 @@ class Odometry:
                 self.slip_intervals += self.slipping
             if dt > 0:
                 self._moving_intervals = self._moving_intervals + 1 if commanded is not None else 0
-            if self._moving_intervals >= 2 and \
+            if control and self._moving_intervals >= 2 and \
                     float(np.max(np.abs(increments / dt - wheel_command))) > self.gyro.load_speed_error:
                 step[:2] = 0.0                                 # pushing: the base is held (module docstring)
                 self.held_intervals += 1
