@@ -89,7 +89,7 @@ class Motion:
 
     def update_odometry(self, stationary: bool = False, command=None):
         """Read encoders and gyro into the odometry with the command held since the last reading (``command``, else
-        the one the drive holds now: it tells a slipping wheel from gripping ones, and a push from travel);
+        the one the drive holds now: a wheel loaded off its command tells a push from travel);
         ``stationary``: the drive stands as commanded (every primitive has stopped it), so the odometry may learn
         the gyro's bias (zero-velocity update)."""
         held = self._command if command is None else command
