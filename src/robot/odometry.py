@@ -26,7 +26,9 @@ is its bias integrated over the driving time. So:
   fit is the wheels' own translation (the rolling directions sum to zero, so the heading drops out of it), and the
   one redundant equation's misfit is the wheels' yaw increment minus the gyro's. That misfit is the same on all
   three wheels, so one interval's kinematics detect a slip but cannot say which wheel slipped: each hypothesis
-  "wheel k slipped" fits the other two exactly. Beyond ``slip_rate`` x dt (a slip) the interval's travel is dropped.
+  "wheel k slipped" fits the other two exactly. Beyond ``slip_rate`` x dt (a slip) the interval's travel is dropped
+  (a wheel pressing on rubble below the bumper turns in place while the base stays put: measured in light rubble,
+  0.5 m of false travel in 4 s without a bumper or stall signal).
   Breaking the tie with the command (the hypothesis farthest from the commanded translation) was measured and not
   kept: on the readings it was tuned on (light rubble, seeds 0-7, replayed) it cut the mean end error from 0.191 to
   0.165 m, but on the readings of eight new runs it raised it from 0.204 to 0.240 m (keeping the least-squares
