@@ -1,14 +1,17 @@
 """Ctrl-C in ``ssl-rescue run``: SIGINT is recorded, and raised as KeyboardInterrupt only at check points.
 
 Python's own SIGINT handler raises KeyboardInterrupt in whatever Python code the main thread runs next. While a
-run starts (importing rerun, building the scene) that code is often not ours, and two outcomes were measured
-(signals sent 0-400 ms after ``--out`` appeared, tests/test_run_outputs.py):
+run starts (importing rerun, building the scene) that code is often not ours, and three outcomes were measured
+(tests/test_run_outputs.py, signals sent 0-400 ms after ``--out`` appeared and as the viewer connected):
 
 * raised inside a weakref callback or ``__del__`` (importlib's module-lock callback while rerun imports), the
   interrupt is printed as "Exception ignored in ..." and dropped: the run went on to its end and exited 0;
 * raised inside ``exec``/``eval`` of a string (how dataclasses and namedtuples get their methods while a module
   imports), CPython 3.11 marks it unhandled although ``main`` caught it, and ``python -m`` then ends by killing
-  itself with SIGINT (status -2) after printing "interrupted" instead of exiting 130.
+  itself with SIGINT (status -2) after printing "interrupted" instead of exiting 130;
+* raised inside ``RerunLogger.__init__`` just after it connected to a viewer, the logger was never returned to be
+  closed by the run: its exit-time close then waited 9 s on a stalled viewer and printed a warning after
+  "interrupted".
 
 Under :func:`deferred_sigint` the handler only sets a flag, and :func:`check_interrupt` raises KeyboardInterrupt
 in our own code: after the slow imports and the viewer probe, and at every simulated control tick and audio block
