@@ -15,11 +15,15 @@ import logging
 import sys
 from pathlib import Path
 
-from ssl_sim.scenario import ScenarioError, load_scenario, scenario_names
+from ssl_sim.interrupt import deferred_sigint
+
+# The scenario, runner and viewer modules are imported inside the commands: they take 1-2 s to import, and
+# a Ctrl-C meanwhile must already find the handler of main() (see ssl_sim.interrupt).
 
 
 def _run(args: argparse.Namespace) -> int:
     from ssl_sim.runner import check_output_dir, format_summary, run_scenario
+    from ssl_sim.scenario import load_scenario
     from ssl_sim.viz import parse_rerun_target
 
     sc = load_scenario(args.scenario)
@@ -59,6 +63,7 @@ def _sweep(args: argparse.Namespace) -> int:
 
 def _record(args: argparse.Namespace) -> int:
     from ssl_sim.record import parse_pose, record_scenario
+    from ssl_sim.scenario import load_scenario
 
     pose = parse_pose(args.pose) if args.pose is not None else None
     truth = record_scenario(load_scenario(args.scenario), args.out, seed=args.seed, duration_s=args.duration,
@@ -78,6 +83,8 @@ def _record(args: argparse.Namespace) -> int:
 
 
 def _list(args: argparse.Namespace) -> int:
+    from ssl_sim.scenario import load_scenario, scenario_names
+
     for name in scenario_names():
         sc = load_scenario(name)
         print(f"{name:<22} {sc.description}")
@@ -85,6 +92,8 @@ def _list(args: argparse.Namespace) -> int:
 
 
 def build_parser() -> argparse.ArgumentParser:
+    from ssl_sim.scenario import scenario_names
+
     p = argparse.ArgumentParser(prog="ssl-rescue", description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     sub = p.add_subparsers(dest="command", required=True)
@@ -127,11 +136,17 @@ def build_parser() -> argparse.ArgumentParser:
 
 
 def main(argv: list[str] | None = None) -> int:
-    args = build_parser().parse_args(argv)
-    logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
     try:
+        # Ctrl-C is raised at check points only, never inside an import (ssl_sim.interrupt): here at the end of
+        # parsing (which imports the scenarios), in ``run`` at every simulated tick. ``sweep`` and ``record`` have
+        # no check points and keep Python's immediate KeyboardInterrupt (a sweep's workers get the Ctrl-C too).
+        with deferred_sigint():
+            args = build_parser().parse_args(argv)
+            logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
+            if args.func is _run:
+                return _run(args)
         return args.func(args)
-    except (ScenarioError, ValueError, FileNotFoundError) as exc:
+    except (ValueError, FileNotFoundError) as exc:  # ScenarioError is a ValueError
         print(f"ssl-rescue: error: {exc}", file=sys.stderr)
         return 2
     except KeyboardInterrupt:

@@ -28,6 +28,7 @@ from __future__ import annotations
 
 import json
 import math
+import os
 import tempfile
 import time
 from dataclasses import asdict
@@ -46,6 +47,7 @@ from ssl_core.health import HealthConfig, MicHealth
 from ssl_core.localizer import Localizer
 from ssl_sim.acoustics import AcousticSimulator
 from ssl_sim.backends import SimAudioSource, array_frame_directions
+from ssl_sim.interrupt import check_interrupt
 from ssl_sim.physics import SimClock, SimDriveBase, SimRobot
 from ssl_sim.physics.scene_gen import ROBOT_RADIUS, free_space_grid
 from ssl_sim.scenario import Scenario, load_scenario
@@ -227,6 +229,7 @@ class RescueRun:
                 self.logger.trail(t, np.array([row[1:4] for row in self.trajectory[::4]] + [[p.x, p.y, p.z]]))
 
     def _on_tick(self) -> None:
+        check_interrupt()  # every control tick and audio block (ssl_sim.interrupt)
         self._record_pose()
         touching = None
         for c in self.robot.contacts():
@@ -250,6 +253,7 @@ class RescueRun:
                 self.logger.event(t, "health", f"{state}: {f}", "WARN" if f in new else "INFO")
 
     def _on_block(self, block, mics) -> None:
+        check_interrupt()
         self._last_block = (int(round(block.timestamp * block.sample_rate)), block.samples.shape[1])
         self._record_pose()
 
@@ -496,10 +500,14 @@ def check_output_dir(path: str | Path, what: str = "out_dir") -> Path:
 
 
 def write_results(result: dict, out_dir: str | Path, name: str = "results.json") -> Path:
+    """Write ``result`` as JSON to ``out_dir/name`` atomically: a reader (or a run killed meanwhile) never
+    leaves or sees half a file."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     p = out / name
-    p.write_text(json.dumps(result, indent=1, default=_json_default))
+    tmp = out / f".{name}.partial"
+    tmp.write_text(json.dumps(result, indent=1, default=_json_default))
+    os.replace(tmp, p)
     return p
 
 

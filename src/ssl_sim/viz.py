@@ -40,6 +40,8 @@ from urllib.parse import urlsplit
 
 import numpy as np
 
+from ssl_sim.interrupt import check_interrupt
+
 __all__ = ["RunLogger", "NullLogger", "RerunLogger", "ViewerUnavailable", "make_logger", "parse_rerun_target"]
 
 log = logging.getLogger(__name__)
@@ -180,11 +182,13 @@ class RerunLogger(RunLogger):
         """Raises :class:`ViewerUnavailable` when a ``spawn`` / ``connect`` viewer cannot be reached."""
         import rerun as rr
 
+        check_interrupt()  # after the slow import and the viewer probe; nothing to undo yet (see ssl_sim.interrupt)
         self.rr = rr
         self.mode, arg = parse_rerun_target(target)
         self.timeout_s = float(timeout_s)
         if (problem := viewer_problem(self.mode, arg, self.timeout_s)) is not None:
             raise ViewerUnavailable(problem)
+        check_interrupt()
         self.rec = rr.RecordingStream(application_id, recording_id=uuid.uuid4())
         self.path: Path | None = None
         self._closed = False
