@@ -35,9 +35,10 @@ class OccupancyConfig:
     robot_radius_m: float = 0.16     # bumper radius (ssl_sim robot model; the real chassis matches)
     contact_width_m: float = 0.3     # width of the obstacle face marked by one contact (~ the bumper's front arc)
     hit_log_odds: float = 2.0        # per bumper contact (one makes a cell occupied: p = 0.88)
-    stall_log_odds: float = 0.6      # per stall or gyro-detected slip: half of them are no obstacle (measured in
-    #                                  dense_pump seeds 0-2: 7 of 12 stalls 0.3-0.5 m from any obstacle, wheels on
-    #                                  debris; bumper presses all within 0.2 m): two at one place make an obstacle
+    stall_log_odds: float = 0.6      # per stall or gyro-detected slip: most are no obstacle (measured, MuJoCo truth:
+    #                                  dense_pump seeds 0-3, 10 of 13 stalls 0.24-0.46 m from any obstacle, wheels
+    #                                  on debris; 66 bumper presses in 7 runs of 4 scenarios all within 0.2 m): two
+    #                                  at one place make an obstacle (the robot does not retry one forever)
     free_log_odds: float = -0.4      # per footprint pass (five passes outweigh one contact)
     occupied_log_odds: float = 1.0   # a cell at or above this is an obstacle
     max_log_odds: float = 6.0
