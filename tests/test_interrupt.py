@@ -1,4 +1,4 @@
-"""Ctrl-C deferred to check points (ssl_sim.interrupt), at the two places where Python's own handling of SIGINT
+"""Ctrl-C deferred to check points (robot.interrupt), at the two places where Python's own handling of SIGINT
 was measured to fail while ``ssl-rescue run`` started: inside ``exec`` of a string and inside a weakref callback.
 
 Each case runs as ``python -m`` (as the flaky CLI test did; the exec case only misbehaves there) and sends itself
@@ -18,7 +18,7 @@ SRC = Path(__file__).resolve().parents[1] / "src"
 _CHILD = '''
 import os, signal, sys, weakref
 
-from ssl_sim.interrupt import check_interrupt, deferred_sigint
+from robot.interrupt import check_interrupt, deferred_sigint
 
 CTRL_C = "os.kill(os.getpid(), signal.SIGINT)\\nfor _ in range(100000): pass"  # the signal, then bytecode to run
 
@@ -69,7 +69,7 @@ def test_ctrl_c_at_a_fragile_point_is_raised_at_the_next_check(tmp_path, where):
 def test_sigint_ignored_by_the_parent_stays_ignored(tmp_path):
     """A run started with SIGINT ignored (``nohup``, a background job of a script) is not made interruptible."""
     code = ("import os, signal, sys\n"
-            "from ssl_sim.interrupt import check_interrupt, deferred_sigint\n"
+            "from robot.interrupt import check_interrupt, deferred_sigint\n"
             "with deferred_sigint():\n"
             "    assert signal.getsignal(signal.SIGINT) is signal.SIG_IGN\n"
             "    os.kill(os.getpid(), signal.SIGINT)\n"
@@ -79,3 +79,53 @@ def test_sigint_ignored_by_the_parent_stays_ignored(tmp_path):
     p = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60,
                        preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
     assert p.returncode == 0 and p.stdout.strip() == "finished", p.stderr
+
+
+def test_a_second_ctrl_c_is_raised_at_once_while_the_first_waits_for_a_check(tmp_path):
+    """A call that never reaches a check point (a device read that blocks for good) still lets the user out."""
+    code = ("import os, signal, sys, time\n"
+            "from robot.interrupt import deferred_sigint\n"
+            "try:\n"
+            "    with deferred_sigint():\n"
+            "        os.kill(os.getpid(), signal.SIGINT)\n"
+            "        print('first held', file=sys.stderr, flush=True)\n"
+            "        os.kill(os.getpid(), signal.SIGINT)\n"
+            "        time.sleep(30)\n"
+            "except KeyboardInterrupt:\n"
+            "    sys.exit(130)\n")
+    env = dict(os.environ, PYTHONPATH=str(SRC))
+    p = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=20,
+                       preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    assert p.returncode == 130 and p.stderr.strip() == "first held", p.stderr
+
+
+def test_ssl_robot_stops_the_drive_and_exits_130_on_ctrl_c(tmp_path):
+    """The robot program at mission pace (replayed audio on the wall clock, dry-run drive): Ctrl-C while it listens
+    or drives ends it with 130 and the drive stopped; a dropped Ctrl-C would leave a real robot driving."""
+    import numpy as np
+    from scipy.io import wavfile
+    sys.path.insert(0, str(Path(__file__).resolve().parent))
+    from signals import plane_wave, speech_like
+    sys.path.insert(0, str(SRC))
+    from ssl_core.geometry import cube8
+    fs = 16000
+    u = np.array([np.cos(0.5), np.sin(0.5), 0.0])
+    x = 0.1 * plane_wave(cube8().positions, u, speech_like(30 * fs, fs, seed=1), fs)
+    rec = tmp_path / "talker.wav"
+    wavfile.write(rec, fs, (x.T * 32767).astype(np.int16))
+    env = dict(os.environ, PYTHONPATH=str(SRC))
+    for delay in (0.5, 3.0):
+        p = subprocess.Popen([sys.executable, "-m", "robot.cli", "--dry-run", "--replay", str(rec), "--realtime",
+                              "--max-time", "60"], env=env, stdout=subprocess.PIPE, stderr=subprocess.PIPE, text=True,
+                             preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+        try:
+            first = p.stdout.readline()          # the mission has started
+            assert "rescue on" in first, first
+            import time
+            time.sleep(delay)
+            p.send_signal(signal.SIGINT)
+            out, err = p.communicate(timeout=30)
+        finally:
+            p.kill()
+        assert p.returncode == 130, (delay, out, err)
+        assert "interrupted, " in out and "Traceback" not in err, (delay, out, err)

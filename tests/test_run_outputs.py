@@ -142,7 +142,7 @@ def test_cli_run_finishes_and_writes_results_without_a_viewer(tmp_path, how):
 #: When Ctrl-C comes: this many s after ``--out`` appears ("out") or after the run connected to the stalled viewer
 #: ("viewer": its second connection; the first is the probe). After ``--out``, rerun is imported (0.6 s on the idle
 #: 2-core machine, 1.5-5 s under load), the viewer probed and connected (10-30 ms), the scene built (0.3 s), then
-#: the run simulates. Python's own SIGINT handling failed inside the import (ssl_sim.interrupt): of 118 signals sent
+#: the run simulates. Python's own SIGINT handling failed inside the import (robot.interrupt): of 118 signals sent
 #: 0-400 ms after ``--out`` appeared, 3 (at 184-208 ms) ended in death by SIGINT instead of exit 130 and 2 (at 140
 #: and 350 ms) were swallowed, the run going on to its end. At the viewer connection it was raised inside
 #: RerunLogger.__init__ after the logger had registered its exit-time close, so "interrupted" was followed by a 9 s

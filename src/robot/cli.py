@@ -18,6 +18,7 @@ import sys
 
 from robot.config_values import field_values
 from robot.hal import Clock, ManualClock, WallClock
+from robot.interrupt import check_interrupt, deferred_sigint
 from robot.rescue import RescueBehaviour, RescueConfig, RescueEvent
 
 PROG = "ssl-robot"
@@ -154,6 +155,10 @@ class _MissionClock(WallClock):
     def now(self) -> float:
         return super().now() - self._t0
 
+    def sleep(self, seconds: float) -> None:
+        check_interrupt()   # every wait of the motion primitives is a safe place to stop (robot.interrupt)
+        super().sleep(seconds)
+
 
 def _stop(drive) -> str:
     """Stop the drive and say what happened (the behaviour tried already; this reports the truth)."""
@@ -236,10 +241,12 @@ def main(argv: list[str] | None = None, out=None) -> int:
     behaviour = RescueBehaviour(audio, drive, clock, localizer, config)
     code = 0
     try:
-        t_end = clock.now() + args.max_time
-        while not behaviour.done and clock.now() < t_end:
-            for e in behaviour.step():
-                _print_event(e, args.json, out)
+        with deferred_sigint():
+            t_end = clock.now() + args.max_time
+            while not behaviour.done and clock.now() < t_end:
+                for e in behaviour.step():
+                    _print_event(e, args.json, out)
+                check_interrupt()
         if not behaviour.done:
             print(f"{PROG}: mission time of {args.max_time:g} s used up", file=out)
     except KeyboardInterrupt:

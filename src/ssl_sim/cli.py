@@ -15,10 +15,10 @@ import logging
 import sys
 from pathlib import Path
 
-from ssl_sim.interrupt import deferred_sigint
+from robot.interrupt import deferred_sigint
 
 # The scenario, runner and viewer modules are imported inside the commands: they take 1-2 s to import, and
-# a Ctrl-C meanwhile must already find the handler of main() (see ssl_sim.interrupt).
+# a Ctrl-C meanwhile must already find the handler of main() (see robot.interrupt).
 
 
 def _run(args: argparse.Namespace) -> int:
@@ -137,7 +137,7 @@ def build_parser() -> argparse.ArgumentParser:
 
 def main(argv: list[str] | None = None) -> int:
     try:
-        # Ctrl-C is raised at check points only, never inside an import (ssl_sim.interrupt): here at the end of
+        # Ctrl-C is raised at check points only, never inside an import (robot.interrupt): here at the end of
         # parsing (which imports the scenarios), in ``run`` at every simulated tick. ``sweep`` and ``record`` have
         # no check points and keep Python's immediate KeyboardInterrupt (a sweep's workers get the Ctrl-C too).
         with deferred_sigint():

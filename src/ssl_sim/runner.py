@@ -47,7 +47,7 @@ from ssl_core.health import HealthConfig, MicHealth
 from ssl_core.localizer import Localizer
 from ssl_sim.acoustics import AcousticSimulator
 from ssl_sim.backends import SimAudioSource, array_frame_directions
-from ssl_sim.interrupt import check_interrupt
+from robot.interrupt import check_interrupt
 from ssl_sim.physics import SimClock, SimDriveBase, SimRobot
 from ssl_sim.physics.scene_gen import ROBOT_RADIUS, free_space_grid
 from ssl_sim.scenario import Scenario, load_scenario
@@ -229,7 +229,7 @@ class RescueRun:
                 self.logger.trail(t, np.array([row[1:4] for row in self.trajectory[::4]] + [[p.x, p.y, p.z]]))
 
     def _on_tick(self) -> None:
-        check_interrupt()  # every control tick and audio block (ssl_sim.interrupt)
+        check_interrupt()  # every control tick and audio block (robot.interrupt)
         self._record_pose()
         touching = None
         for c in self.robot.contacts():

@@ -40,7 +40,7 @@ from urllib.parse import urlsplit
 
 import numpy as np
 
-from ssl_sim.interrupt import check_interrupt
+from robot.interrupt import check_interrupt
 
 __all__ = ["RunLogger", "NullLogger", "RerunLogger", "ViewerUnavailable", "make_logger", "parse_rerun_target"]
 
@@ -182,7 +182,7 @@ class RerunLogger(RunLogger):
         """Raises :class:`ViewerUnavailable` when a ``spawn`` / ``connect`` viewer cannot be reached."""
         import rerun as rr
 
-        check_interrupt()  # after the slow import and the viewer probe; nothing to undo yet (see ssl_sim.interrupt)
+        check_interrupt()  # after the slow import and the viewer probe; nothing to undo yet (see robot.interrupt)
         self.rr = rr
         self.mode, arg = parse_rerun_target(target)
         self.timeout_s = float(timeout_s)

@@ -1,4 +1,5 @@
-"""Ctrl-C in ``ssl-rescue run``: SIGINT is recorded, and raised as KeyboardInterrupt only at check points.
+"""Ctrl-C in ``ssl-rescue run`` and ``ssl-robot``: SIGINT is recorded, and raised as KeyboardInterrupt only at
+check points; a second Ctrl-C before the next check point is raised at once (a call that blocks for good).
 
 Python's own SIGINT handler raises KeyboardInterrupt in whatever Python code the main thread runs next. While a
 run starts (importing rerun, building the scene) that code is often not ours, and three outcomes were measured
@@ -16,7 +17,10 @@ run starts (importing rerun, building the scene) that code is often not ours, an
 Under :func:`deferred_sigint` the handler only sets a flag, and :func:`check_interrupt` raises KeyboardInterrupt
 in our own code: after the slow imports and the viewer probe, and at every simulated control tick and audio block
 (at most 0.8 s of wall time apart, measured on the loaded 2-core machine). A Ctrl-C during an import is acted on
-when the import is done (rerun: 0.6 s idle, 1.5-5 s under load).
+when the import is done (rerun: 0.6 s idle, 1.5-5 s under load). ``ssl-robot`` checks at every wait of its mission
+clock (the motion primitives' control ticks) and between behaviour steps: a dropped Ctrl-C there would leave the
+robot driving. A second Ctrl-C before the first is acted on raises at once, wherever the program is, as Python's
+own handling would (a device read that never returns still lets the user out).
 """
 from __future__ import annotations
 
@@ -32,6 +36,8 @@ _pending = False  # set by the handler; a plain bool: the handler must not take 
 
 def _record(signum: int, frame) -> None:
     global _pending
+    if _pending:   # the second press: the first is still waiting for a check point
+        raise KeyboardInterrupt
     _pending = True
 
 
