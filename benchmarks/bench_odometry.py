@@ -37,19 +37,18 @@ def main(argv=None) -> int:
             rows.append(odometry_drift(args.scenario, seed, args.duration))
     print(f"bench_odometry: {args.scenario}, {args.duration:g} s per seed, end pose against MuJoCo truth")
     print(f"{'seed':>4} {'bumps':>5} {'heading deg':>11} {'pos m':>6} {'wheels deg':>10} {'wheels m':>8} "
-          f"{'bias deg/s':>10} {'estimate':>8} {'ZUPTs':>5} {'slips':>5} {'held':>5} {'CPU s':>6}")
+          f"{'bias deg/s':>10} {'estimate':>8} {'ZUPTs':>5} {'slips':>5} {'CPU s':>6}")
     for r in rows:
         print(f"{r['seed']:>4} {r['bumper_recoveries']:>5} {r['heading_error_deg']:>11.2f} "
               f"{r['position_error_m']:>6.3f} {r['wheels_heading_error_deg']:>10.2f} "
               f"{r['wheels_position_error_m']:>8.3f} {r['gyro_bias_deg_s']:>10.4f} "
               f"{r['gyro_bias_estimate_deg_s']:>8.4f} {r['bias_updates']:>5} {r['slip_intervals']:>5} "
-              f"{r['held_intervals']:>5} "
               f"{r['cpu_s']:>6.1f}")
     met = all(r["heading_error_deg"] <= 3.0 and r["position_error_m"] <= 0.3 for r in rows)
     print(f"target (<= 3 deg and <= 0.3 m on every seed): {'met' if met else 'NOT met'}")
     keys = ("seed", "sim_time_s", "bumper_recoveries", "heading_error_deg", "position_error_m",
             "wheels_heading_error_deg", "wheels_position_error_m", "gyro_bias_deg_s", "gyro_bias_estimate_deg_s",
-            "bias_updates", "slip_intervals", "held_intervals", "cpu_s")
+            "bias_updates", "slip_intervals", "cpu_s")
     print(json.dumps({"bench": "odometry", "scenario": args.scenario, "duration_s": args.duration, "target_met": met,
                       "runs": [{k: (round(r[k], 4) if isinstance(r[k], float) else r[k]) for k in keys}
                                for r in rows]}))

@@ -4,7 +4,7 @@ import pytest
 
 from robot.hal import DriveStatus, WheelOdometry
 from robot.kinematics import OmniDriveParams, inverse_kinematics
-from robot.odometry import GyroFusionConfig, Odometry, fit_translation, wrap_angle
+from robot.odometry import GyroFusionConfig, Odometry, wrap_angle
 
 P = OmniDriveParams()
 
@@ -164,75 +164,6 @@ def test_no_bias_learnt_unless_commanded_and_wheels_stand():
         odo2.update(r, w + 0.01, stationary=True)
     assert odo2.bias_updates == 0 and odo2.gyro_bias == 0.0
     assert odo2.pose[2] == pytest.approx(0.3 * 0.5 + 0.01 * 0.5, abs=1e-9)   # the gyro's heading, bias and all
-
-
-def test_fit_translation_without_slip_is_the_wheels_own_translation():
-    """Gripping wheels and the true yaw increment: least squares returns the twist's translation exactly, no misfit;
-    a yaw increment off by d leaves the translation (the rolling directions sum to zero) and a misfit of -d."""
-    rng = np.random.default_rng(5)
-    for twist in rng.uniform([-0.3, -0.3, -1.5], [0.3, 0.3, 1.5], size=(20, 3)):
-        dt = 0.05
-        fit = fit_translation(inverse_kinematics(twist, P) * dt, twist[2] * dt, P, slip_yaw=0.15 * dt)
-        np.testing.assert_allclose(fit.translation, twist[:2] * dt, atol=1e-12)
-        assert abs(fit.misfit) < 1e-12 and not fit.slipped
-        off = fit_translation(inverse_kinematics(twist, P) * dt, twist[2] * dt + 0.002, P)
-        np.testing.assert_allclose(off.translation, twist[:2] * dt, atol=1e-12)
-        assert off.misfit == pytest.approx(-0.002, abs=1e-12)
-    with pytest.raises(ValueError, match="wheel_increments"):
-        fit_translation(np.zeros(2), 0.0, P)
-
-
-@pytest.mark.parametrize("slipping", [0, 1, 2])
-def test_a_slipping_wheel_is_detected_but_not_isolated(slipping):
-    """The base moves with a known twist; one wheel's encoder gains e = 0.1 rad of slip in 0.05 s. The misfit is
-    the slip's yaw, r e / (3 R); least squares spreads the slip: 2/3 of its rim travel along that wheel's rolling
-    direction. Each hypothesis "wheel k slipped" solves the other two rim equations exactly, and the wrong ones are
-    as consistent as the right one: one interval cannot say which wheel slipped, so beyond the bound the travel is
-    dropped."""
-    dt, true, slip = 0.05, np.array([0.12, -0.2, 0.7]), 0.1
-    wheels = inverse_kinematics(true, P) * dt
-    wheels[slipping] += slip
-    fit = fit_translation(wheels, true[2] * dt, P)
-    assert fit.misfit == pytest.approx(P.wheel_radius * slip / (3 * P.base_radius), rel=1e-12)
-    th = P.wheel_angles[slipping]
-    rolling = np.array([-np.sin(th), np.cos(th)])
-    np.testing.assert_allclose(fit.translation - true[:2] * dt, 2 / 3 * P.wheel_radius * slip * rolling, atol=1e-12)
-    j = P.jacobian
-    rhs = wheels - j[:, 2] * true[2] * dt
-    for k in range(3):
-        keep = [i for i in range(3) if i != k]
-        pair = np.linalg.solve(j[keep, :2], rhs[keep])            # exact fit of the two kept wheels
-        assert np.allclose(pair, true[:2] * dt, atol=1e-12) == (k == slipping)
-    bounded = fit_translation(wheels, true[2] * dt, P, slip_yaw=0.15 * dt)
-    assert bounded.slipped and np.array_equal(bounded.translation, [0.0, 0.0])
-
-
-def test_odometry_drops_the_travel_of_a_push_the_gyro_cannot_see():
-    """Commanded 0.25 m/s ahead against rubble: the wheels all turn as if at 0.15 m/s (their yaw agrees with the
-    gyro's: no slip to see) while the base stays put. From the second interval of the move on, a wheel more than
-    load_speed_error off its command drops the travel; the first interval counts (the wheels may still be spinning
-    up), as does a move whose wheels keep to their command."""
-    dt, command = 0.05, np.array([0.25, 0.0, 0.0])
-    push = inverse_kinematics((0.15, 0.0, 0.0), P)
-    assert np.max(np.abs(push - inverse_kinematics(command, P))) > GyroFusionConfig().load_speed_error
-    odo = Odometry(P)
-    angles, t = np.zeros(3), 0.0
-    odo.update(WheelOdometry(t, angles.copy(), np.zeros(3)), 0.0, stationary=True, command=(0.0, 0.0, 0.0))
-    for _ in range(20):
-        angles, t = angles + push * dt, t + dt
-        odo.update(WheelOdometry(t, angles.copy(), push), 0.0, command=command)
-    assert odo.held_intervals == 19 and odo.slip_intervals == 0
-    np.testing.assert_allclose(odo.pose, [0.15 * dt, 0.0, 0.0], atol=1e-12)   # the first interval only
-    wheels_alone = _run(_readings([((0.15, 0.0, 0.0), 1.0)]))
-    assert wheels_alone.pose[0] == pytest.approx(0.15, abs=1e-9)            # what the encoders alone claim
-    follows = inverse_kinematics(command, P)                                 # a free move: all its travel
-    for _ in range(20):
-        angles, t = angles + follows * dt, t + dt
-        odo.update(WheelOdometry(t, angles.copy(), follows), 0.0, command=command)
-    assert odo.held_intervals == 19
-    np.testing.assert_allclose(odo.pose, [0.15 * dt + 0.25, 0.0, 0.0], atol=1e-12)
-    with pytest.raises(ValueError, match="command"):
-        odo.update(WheelOdometry(t, angles.copy(), push), 0.0, command=(0.1, 0.0))
 
 
 def test_yaw_rate_must_be_finite():

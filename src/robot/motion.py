@@ -77,28 +77,16 @@ class Motion:
                  fatal: Callable[[DriveStatus], bool] = lambda s: False) -> None:
         self.drive, self.clock, self.odometry, self.config, self.fatal = drive, clock, odometry, config, fatal
         self._slips = 0
-        self._command = (0.0, 0.0, 0.0)     # the body twist the drive holds (m/s, m/s, rad/s)
 
-    def _set_twist(self, vx: float, vy: float, omega: float) -> None:
-        self.drive.set_twist(vx, vy, omega)
-        self._command = (vx, vy, omega)
-
-    def _stop(self) -> None:
-        self.drive.stop()
-        self._command = (0.0, 0.0, 0.0)
-
-    def update_odometry(self, stationary: bool = False, command=None):
-        """Read encoders and gyro into the odometry with the command held since the last reading (``command``, else
-        the one the drive holds now: a wheel loaded off its command tells a push from travel);
-        ``stationary``: the drive stands as commanded (every primitive has stopped it), so the odometry may learn
-        the gyro's bias (zero-velocity update)."""
-        held = self._command if command is None else command
-        return self.odometry.update(self.drive.odometry(), self.drive.status().yaw_rate, stationary, held)
+    def update_odometry(self, stationary: bool = False):
+        """Read encoders and gyro into the odometry; ``stationary``: the drive stands as commanded (every
+        primitive has stopped it), so the odometry may learn the gyro's bias (zero-velocity update)."""
+        return self.odometry.update(self.drive.odometry(), self.drive.status().yaw_rate, stationary)
 
     def stand(self, seconds: float) -> None:
         """Stand still (drive stopped) for ``seconds``, reading the odometry every control tick: the braking
         is tracked and, once the wheels stand, each tick is a zero-velocity update of the gyro's bias."""
-        self._stop()
+        self.drive.stop()
         t_end = self.clock.now() + seconds
         while (left := t_end - self.clock.now()) > 1e-9:
             self.clock.sleep(min(self.config.control_dt, left))
@@ -116,9 +104,8 @@ class Motion:
         elif self._slips >= self.config.slip_intervals:
             kind = "slip"
         if kind is not None:
-            held = self._command                # the reading below covers the interval driven under it
-            self._stop()
-            self.update_odometry(command=held)
+            self.drive.stop()
+            self.update_odometry()
             raise Blocked(kind, st, heading_world)
 
     def _tick_odometry(self):
@@ -140,14 +127,14 @@ class Motion:
                 if abs(remaining) <= math.radians(1.0) or self.clock.now() >= t_end:
                     break
                 omega = math.copysign(min(cfg.turn_speed, max(0.25, 2.5 * abs(remaining))), remaining)
-                self._set_twist(0.0, 0.0, omega)
+                self.drive.set_twist(0.0, 0.0, omega)
                 self.clock.sleep(cfg.control_dt)
                 self._check(True, yaw)
                 if watch.stalled(self.clock.now(), float(self._tick_odometry()[2]), abs(omega)):
-                    self._stop()
+                    self.drive.stop()
                     raise Blocked("stall", DriveStatus(stalled=True), yaw)
         finally:
-            self._stop()
+            self.drive.stop()
         self.update_odometry()
 
     def translate(self, heading: float, distance: float, speed: float | None = None,
@@ -174,16 +161,16 @@ class Motion:
                     break
                 v = min(speed, max(0.05, 2.0 * remaining))
                 rel = heading - (yaw - yaw0)  # hold the start yaw: the direction in the body frame turns back
-                self._set_twist(v * math.cos(rel), v * math.sin(rel), -2.0 * (yaw - yaw0))
+                self.drive.set_twist(v * math.cos(rel), v * math.sin(rel), -2.0 * (yaw - yaw0))
                 self.clock.sleep(cfg.control_dt)
                 armed = armed or not self.drive.status().bumper
                 self._check(armed, world_heading)
                 x, y, _ = self._tick_odometry()
                 if watch.stalled(self.clock.now(), (x - x0) * ux + (y - y0) * uy, v):
-                    self._stop()
+                    self.drive.stop()
                     raise Blocked("stall", DriveStatus(stalled=True), world_heading)
         finally:
-            self._stop()
+            self.drive.stop()
         self.update_odometry()
         return done
 

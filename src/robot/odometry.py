@@ -21,25 +21,12 @@ is its bias integrated over the driving time. So:
   Then the gyro reads its bias; a scalar Kalman filter (the bias a random walk of ``bias_walk``, each
   reading its noise ``rate_noise``) averages these readings, gating ones beyond ``bias_gate`` sigma (the robot
   bumped while standing). Moving wheels are no reference: their own heading error is what the gyro corrects;
-* **translation** (``fit_translation``): with the heading increment fixed to the gyro's, the three wheels' rim
-  equations (``robot.kinematics``' Jacobian) are over-determined in the two unknowns (dx, dy). Their least-squares
-  fit is the wheels' own translation (the rolling directions sum to zero, so the heading drops out of it), and the
-  one redundant equation's misfit is the wheels' yaw increment minus the gyro's. That misfit is the same on all
-  three wheels, so one interval's kinematics detect a slip but cannot say which wheel slipped: each hypothesis
-  "wheel k slipped" fits the other two exactly. Beyond ``slip_rate`` x dt (a slip) the interval's travel is dropped
-  (a wheel pressing on rubble below the bumper turns in place while the base stays put: measured in light rubble,
-  0.5 m of false travel in 4 s without a bumper or stall signal).
-  Breaking the tie with the command (the hypothesis farthest from the commanded translation) was measured and not
-  kept: on the readings it was tuned on (light rubble, seeds 0-7, replayed) it cut the mean end error from 0.191 to
-  0.165 m, but on the readings of eight new runs it raised it from 0.204 to 0.240 m (keeping the least-squares
-  travel: 0.244 and 0.321 m), and on synthetic slips (the slipping wheel at its command, held back or over-spinning)
-  it picks the slipping wheel at chance or below;
-* **pushing**: a straight push against rubble shows no yaw misfit at all (the wheels turn together while the base
-  stays put), but it loads the wheels: when the drive has been commanded to move for more than one interval and a
-  wheel's mean speed over the interval is more than ``load_speed_error`` off its command, the base is taken as held
-  and the travel dropped (that also lets the motion layer's progress check see the stall).
+* **slip**: if the wheels' yaw increment differs from the gyro's by more than ``slip_rate`` x dt, the wheels
+  slipped: their translation for that interval is dropped (a wheel pressing on rubble below the bumper turns
+  in place while the base stays put: measured in light rubble, 0.5 m of false travel in 4 s without a bumper
+  or stall signal).
 
-The translation is turned into the odometry frame by the fused heading.
+Translation is always the wheels', turned by the fused heading.
 """
 from __future__ import annotations
 
@@ -51,7 +38,7 @@ import numpy as np
 
 from robot.config_values import need
 from robot.hal import WheelOdometry
-from robot.kinematics import OmniDriveParams, forward_kinematics, integrate_pose, twist_to_wheels
+from robot.kinematics import OmniDriveParams, forward_kinematics, integrate_pose
 
 
 class Pose2D(NamedTuple):
@@ -72,11 +59,6 @@ class GyroFusionConfig:
     #                                    rubble (seeds 0-3, 200 s): the gyro's error per reading <= 0.001 rad/s, the
     #                                    gripping wheels' 90th percentile 0.02; all 189 intervals above 0.15 were true
     #                                    slips (wheels vs truth > 0.1 rad/s), none over 0.15 true slip was missed
-    load_speed_error: float = 1.0      # rad/s a wheel's interval-mean speed may be off its command while the base
-    #                                    follows it. Measured in light rubble (seeds 0-7, 200 s; the command held for
-    #                                    more than one 50 ms interval, wheels' travel >= 0.1 m/s): a moving base's
-    #                                    wheels 95th / 99th percentile 0.42 / 0.78 rad/s, 0.4 % above 1; a base held
-    #                                    by rubble (true travel < 40 % of the wheels') median 0.96, 49 % above 1
     still_wheel_speed: float = 0.05    # rad/s: wheels slower than this stand (a parked robot's wheels jitter at
     #                                    0.03 rad/s, 90th percentile, measured in light rubble: SimRobot._settled)
     still_wheel_angle: float = 0.01    # rad of encoder travel since the previous reading that still counts as
@@ -94,37 +76,12 @@ class GyroFusionConfig:
         need(self, self.max_gyro_dt_s > 0, "max_gyro_dt_s", "> 0 s")
         need(self, self.gyro_window_s > 0, "gyro_window_s", "> 0 s")
         need(self, self.slip_rate > 0, "slip_rate", "> 0 rad/s")
-        need(self, self.load_speed_error > 0, "load_speed_error", "> 0 rad/s")
         need(self, self.still_wheel_speed > 0, "still_wheel_speed", "> 0 rad/s")
         need(self, self.still_wheel_angle > 0, "still_wheel_angle", "> 0 rad")
         need(self, self.rate_noise > 0, "rate_noise", "> 0 rad/s")
         need(self, self.bias_sigma0 > 0, "bias_sigma0", "> 0 rad/s")
         need(self, self.bias_walk >= 0, "bias_walk", ">= 0 rad/s/sqrt(s)")
         need(self, self.bias_gate > 0, "bias_gate", "> 0 sigma")
-
-
-class TranslationFit(NamedTuple):
-    """One interval's body translation with the heading increment given (``fit_translation``)."""
-
-    translation: np.ndarray      # (dx, dy) m, robot frame (as ``forward_kinematics`` of the increments)
-    misfit: float                # rad: the wheels' yaw increment minus the given one
-    slipped: bool                # |misfit| beyond the slip bound: the translation is dropped (zero)
-
-
-def fit_translation(wheel_increments, yaw_increment: float, params: OmniDriveParams = OmniDriveParams(),
-                    slip_yaw: float = math.inf) -> TranslationFit:
-    """Body translation from three wheel-angle increments (rad) with the heading increment fixed to
-    ``yaw_increment`` (rad: the gyro's): least squares over the three rim equations, or none if the misfit
-    exceeds ``slip_yaw`` (rad; module docstring)."""
-    dth = np.asarray(wheel_increments, dtype=float)
-    if dth.shape != (3,):
-        raise ValueError(f"wheel_increments: expected 3 wheel-angle increments (rad), got shape {dth.shape}")
-    j = params.jacobian
-    a, c = j[:, :2], dth - j[:, 2] * yaw_increment        # rim equations: a @ (dx, dy) = c
-    misfit = float(forward_kinematics(dth, params)[2] - yaw_increment)
-    if abs(misfit) > slip_yaw:
-        return TranslationFit(np.zeros(2), misfit, True)
-    return TranslationFit(np.linalg.lstsq(a, c, rcond=None)[0], misfit, False)
 
 
 class Odometry:
@@ -160,8 +117,6 @@ class Odometry:
         self.bias_updates = 0         # standstill readings the bias estimate took in
         self.slip_intervals = 0       # intervals in which the wheels' yaw was rejected as slip
         self.slipping = False         # the last interval was one of them
-        self.held_intervals = 0       # intervals whose travel was dropped as a push against an obstacle
-        self._moving_intervals = 0    # consecutive intervals with a motion command
 
     @property
     def pose(self) -> np.ndarray:
@@ -188,12 +143,10 @@ class Odometry:
         """Standard deviation of the bias estimate (rad/s)."""
         return math.sqrt(self._bias_var)
 
-    def update(self, reading: WheelOdometry, yaw_rate: float | None = None, stationary: bool = False,
-               command=None) -> np.ndarray:
+    def update(self, reading: WheelOdometry, yaw_rate: float | None = None, stationary: bool = False) -> np.ndarray:
         """Fold in one encoder reading and, if there is a gyro, its yaw rate (rad/s, CCW: the mean over the gyro's
-        last window); ``stationary``: the drive is commanded to stand (nothing sent since it stopped), so a reading
-        whose wheels stand too is a zero-velocity update; ``command``: the body twist (vx, vy, omega; m/s, m/s,
-        rad/s) the drive held since the previous reading, None if unknown. Returns the new pose."""
+        last window); ``stationary``: the drive is commanded to stand (nothing sent
+        since it stopped), so a reading whose wheels stand too is a zero-velocity update. Returns the new pose."""
         angles = np.asarray(reading.wheel_angles, dtype=float)
         if angles.shape != (3,):
             raise ValueError(f"wheel_angles: expected 3 cumulative wheel angles (rad), got shape {angles.shape}")
@@ -203,20 +156,11 @@ class Odometry:
             )
         if yaw_rate is not None and not np.isfinite(yaw_rate):
             raise ValueError(f"yaw_rate: expected a finite rate (rad/s) or None, got {yaw_rate!r}")
-        wheel_command = None
-        if command is not None:
-            cmd = np.asarray(command, dtype=float)
-            if cmd.shape != (3,) or not np.all(np.isfinite(cmd)):
-                raise ValueError(
-                    f"command: expected a finite body twist (vx m/s, vy m/s, omega rad/s), got {command!r}")
-            wheel_command = twist_to_wheels(cmd, self.params)     # what the drive turns the wheels at (rad/s)
         speeds = np.asarray(reading.wheel_speeds, dtype=float)
         if self._last_angles is not None:
-            increments = angles - self._last_angles
-            step = forward_kinematics(increments, self.params)  # (dx, dy, dyaw) body frame
+            step = forward_kinematics(angles - self._last_angles, self.params)  # (dx, dy, dyaw) body frame
             dt = float(reading.timestamp) - self._last_time
-            control = 0 < dt <= self.gyro.max_gyro_dt_s           # a control-loop interval (not a listen's gap)
-            still = (stationary and float(np.max(np.abs(increments))) < self.gyro.still_wheel_angle
+            still = (stationary and float(np.max(np.abs(angles - self._last_angles))) < self.gyro.still_wheel_angle
                      and float(np.max(np.abs(speeds))) < self.gyro.still_wheel_speed)
             if not still:
                 self._still_since = None
@@ -226,21 +170,13 @@ class Odometry:
             # stillness keep the braking out of it (less a tenth: timestamps fall on physics/clock ticks).
             standing = still and reading.timestamp - self._still_since >= 1.9 * self.gyro.gyro_window_s
             self.slipping = False
-            commanded = wheel_command is not None and bool(np.any(wheel_command)) and control
-            if yaw_rate is not None and standing:
-                self._learn_bias(float(yaw_rate), float(reading.timestamp))
-            elif yaw_rate is not None and control:
-                step[2] = (float(yaw_rate) - self._bias) * dt
-                fit = fit_translation(increments, step[2], self.params, self.gyro.slip_rate * dt)
-                step[:2] = fit.translation
-                self.slipping = fit.slipped
-                self.slip_intervals += fit.slipped
-            if dt > 0:
-                self._moving_intervals = self._moving_intervals + 1 if commanded else 0
-            if control and self._moving_intervals >= 2 and \
-                    float(np.max(np.abs(increments / dt - wheel_command))) > self.gyro.load_speed_error:
-                step[:2] = 0.0                                 # pushing: the base is held (module docstring)
-                self.held_intervals += 1
+            if yaw_rate is not None:
+                if standing:
+                    self._learn_bias(float(yaw_rate), float(reading.timestamp))
+                else:
+                    step[2], self.slipping = self._fused_yaw(float(step[2]), float(yaw_rate), dt)
+                if self.slipping:
+                    step[:2] = 0.0
             self._pose = integrate_pose(self._pose, step, 1.0)
             # At constant body twist the speed is constant along the arc: length = |(dx, dy)|.
             self._distance += float(np.hypot(step[0], step[1]))
@@ -248,6 +184,17 @@ class Odometry:
         self._last_time = float(reading.timestamp)
         self._twist = forward_kinematics(speeds, self.params)
         return self.pose
+
+    def _fused_yaw(self, wheel_dyaw: float, rate: float, dt: float) -> tuple[float, bool]:
+        """(heading increment, slipped) for one interval while not standing."""
+        g = self.gyro
+        if dt <= 0 or dt > g.max_gyro_dt_s:
+            return wheel_dyaw, False
+        gyro_dyaw = (rate - self._bias) * dt
+        if abs(wheel_dyaw - gyro_dyaw) > g.slip_rate * dt:
+            self.slip_intervals += 1
+            return gyro_dyaw, True
+        return gyro_dyaw, False
 
     def _learn_bias(self, rate: float, time: float) -> None:
         """Zero-velocity update: ``rate`` (rad/s) read standing still is the bias plus noise."""

@@ -547,9 +547,9 @@ def odometry_drift(scenario: Scenario | str | Path, seed: int, duration_s: float
     wheels = Odometry(run.robot.params, run.world.robot_start)
     fused_update = beh.odometry.update
 
-    def both(reading, yaw_rate=None, stationary=False, command=None):
+    def both(reading, yaw_rate=None, stationary=False):
         wheels.update(reading)
-        return fused_update(reading, yaw_rate, stationary, command)
+        return fused_update(reading, yaw_rate, stationary)
 
     beh.odometry.update = both
     t0 = time.process_time()
@@ -567,8 +567,7 @@ def odometry_drift(scenario: Scenario | str | Path, seed: int, duration_s: float
             "wheels_heading_error_deg": hw, "wheels_position_error_m": pw,
             "gyro_bias_deg_s": round(math.degrees(run.drive.gyro_bias), 4),
             "gyro_bias_estimate_deg_s": round(math.degrees(beh.odometry.gyro_bias), 4),
-            "bias_updates": beh.odometry.bias_updates, "slip_intervals": beh.odometry.slip_intervals,
-            "held_intervals": beh.odometry.held_intervals}
+            "bias_updates": beh.odometry.bias_updates, "slip_intervals": beh.odometry.slip_intervals}
 
 
 def format_summary(result: dict) -> str:
