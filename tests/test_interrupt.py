@@ -75,9 +75,7 @@ def test_sigint_ignored_by_the_parent_stays_ignored(tmp_path):
             "    os.kill(os.getpid(), signal.SIGINT)\n"
             "    check_interrupt()\n"
             "print('finished')\n")
-    env = dict(os.environ, PYTHONPATH=str(SRC))
-    p = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=60,
-                       preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_IGN))
+    p = _python_c(code, signal.SIG_IGN)
     assert p.returncode == 0 and p.stdout.strip() == "finished", p.stderr
 
 
@@ -93,10 +91,15 @@ def test_a_second_ctrl_c_is_raised_at_once_while_the_first_waits_for_a_check(tmp
             "        time.sleep(30)\n"
             "except KeyboardInterrupt:\n"
             "    sys.exit(130)\n")
-    env = dict(os.environ, PYTHONPATH=str(SRC))
-    p = subprocess.run([sys.executable, "-c", code], env=env, capture_output=True, text=True, timeout=20,
-                       preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    p = _python_c(code, signal.SIG_DFL)
     assert p.returncode == 130 and p.stderr.strip() == "first held", p.stderr
+
+
+def _python_c(code: str, sigint) -> subprocess.CompletedProcess:
+    """Run ``python -c code`` with this tree's sources, SIGINT set to ``sigint`` by the parent (as a shell would)."""
+    return subprocess.run([sys.executable, "-c", code], env=dict(os.environ, PYTHONPATH=str(SRC)),
+                          capture_output=True, text=True, timeout=60,
+                          preexec_fn=lambda: signal.signal(signal.SIGINT, sigint))
 
 
 def test_ssl_robot_stops_the_drive_and_exits_130_on_ctrl_c(tmp_path):
