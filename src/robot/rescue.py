@@ -410,7 +410,8 @@ class RescueBehaviour:
                 # At its estimate and no cue says a mouth is here: listen a few times, then it is a reflection
                 # (a mirror image beyond a wall triangulates as tightly as a caller: measured in light rubble).
                 # Only a listen that hears it without a cue counts (a caller who pauses says nothing); listens that
-                # do not hear it at all end the wait after twice as many.
+                # do not hear it at all end the wait after twice as many (after as many: light rubble seeds 0-15,
+                # 180 s, 35 of 48 callers found instead of 40, same session).
                 if ev is None:
                     n = self._unheard_at[sid] = self._unheard_at.get(sid, 0) + 1
                     if n < 2 * cfg.reject_after_listens:
