@@ -72,10 +72,13 @@ def run(case, sir_db, rooms, cfg: LocalizerConfig, hear: bool, with_talker: bool
     hearing = Hearing(loc.geometry.positions, config=hearing_config or HearingConfig()) if hear else None
     her_det, m_det, ghost, off_her, off_m, per_s = [], [], [], [], [], []
     ghost_track, ghost_track_her = [], []
+    scan_log = []   # the hearing's voice-scan detections: (time, direction)
     for k in range(SECONDS * 10):
         block = x[:, k * BLOCK:(k + 1) * BLOCK]
         for r in loc.process(block):
-            tracks = tracker.update(r.detections, r.time)
+            voiced = hearing.voice_detections() if hear else []
+            scan_log += [(r.time, d.direction) for d in voiced]
+            tracks = tracker.update([*r.detections, *voiced], r.time)
             sec = int(r.time)
             if sec >= SETTLE_S and sec < SECONDS:
                 d_her = [_deg(d.direction, u_her) for d in r.detections]
@@ -110,6 +113,10 @@ def run(case, sir_db, rooms, cfg: LocalizerConfig, hear: bool, with_talker: bool
         out["her_track"] = [e is not None for e in her]
         out["near"] = [any(classify(e) is VoiceClass.VOICE and _deg(e.direction, u_her) <= 10 for e in ev)
                        for ev, t in scored if t]
+        scan = [(int(t), _deg(u, u_her)) for t, u in scan_log if SETTLE_S <= t < SECONDS]
+        out["scan_her"] = [any(s == sec and d <= 10 for s, d in scan)
+                           for sec in range(SETTLE_S, SECONDS) if talks[sec]]
+        out["scan_off"] = [d > 20 for _, d in scan]
     return out
 
 
@@ -117,7 +124,8 @@ def _row(name: str, r: dict) -> str:
     def pct(k):
         return f"{100 * np.mean(r[k]):.0f}" if len(r[k]) else "-"
     return (f"| {name} | {pct('det6')} / {pct('det0')} | {pct('mdet6')} | {pct('ghost6')} / {pct('ghost0')} | "
-            f"{pct('htrack')} | {pct('voice')} | {pct('mtrack')} | {pct('nonvoice')} | {pct('near')} |")
+            f"{pct('htrack')} | {pct('voice')} | {pct('mtrack')} | {pct('nonvoice')} | {pct('near')} | "
+            f"{pct('scan6')} / {pct('scan0')} | {pct('scanoff6')} | {len(r['scanalone'])} |")
 
 
 def main() -> None:
@@ -138,20 +146,25 @@ def main() -> None:
     pooled: dict[str, list] = {}
     print(f"rooms={args.rooms} overrides={over} hearing={hear_over}")
     print("| room | her det -6 / 0 dB | machine det -6 | ghost -6 / 0 dB | her track -6 | her VOICE -6 | "
-          "machine track -6 | machine NON_VOICE -6 | VOICE within 10 deg, 0 dB |")
-    print("|---|---|---|---|---|---|---|---|---|")
+          "machine track -6 | machine NON_VOICE -6 | VOICE within 10 deg, 0 dB | voice scan on her -6 / 0 dB | "
+          "scan detections off her -6 | scan detections, machine alone |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
     for case in cases:
         a = run(case, -6.0, args.rooms, cfg, not args.quick, hearing_config=hcfg)
         b = run(case, 0.0, args.rooms, cfg, not args.quick, hearing_config=hcfg)
+        c = run(case, -6.0, args.rooms, cfg, not args.quick, with_talker=False, hearing_config=hcfg)
         row = {"det6": a["her_det"], "det0": b["her_det"], "mdet6": a["m_det"], "ghost6": a["ghost"],
                "ghost0": b["ghost"], "htrack": a.get("her_track", []), "voice": a.get("voice", []),
-               "mtrack": a.get("m_track", []), "nonvoice": a.get("nonvoice", []), "near": b.get("near", [])}
+               "mtrack": a.get("m_track", []), "nonvoice": a.get("nonvoice", []), "near": b.get("near", []),
+               "scan6": a.get("scan_her", []), "scan0": b.get("scan_her", []), "scanoff6": a.get("scan_off", []),
+               "scanalone": c.get("scan_off", [])}
         for k, v in row.items():
             pooled.setdefault(k, []).extend(v)
         print(_row(str(case), row), flush=True)
     print(_row("pooled", pooled))
     print(json.dumps({"bench": "talker_rooms", "rooms": args.rooms, "overrides": over, "hearing": hear_over,
-                      **{k: round(float(np.mean(v)), 3) if v else None for k, v in pooled.items()}}))
+                      **{k: round(float(np.mean(v)), 3) if v else None for k, v in pooled.items() if k != "scanalone"},
+                      "scan_detections_machine_alone": len(pooled["scanalone"])}))
 
 
 if __name__ == "__main__":

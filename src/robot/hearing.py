@@ -62,6 +62,8 @@ import numpy as np
 from robot.hal import as_float_audio
 from robot.vad import SAMPLE_RATE, SPEECH_THRESHOLD, SileroVad, VadStream
 from ssl_core.beamform import FULL_SCALE_SINE_MS, MpdrBeamformer, OverlapAdd, StftStream, level_db
+from ssl_core.detection import Detection
+from ssl_core.grid import direction_from_angles
 from ssl_core.noise import NoiseFloor
 from ssl_core.tracking import Track
 
@@ -108,8 +110,28 @@ class HearingConfig:
                                 # (0: off)
     beam_update_s: float = 0.5     # MPDR inverse covariance (and weights) refreshed every 0.5 s of listening
                                    # (1 s lost windows in the room cases; README, "Cost")
+    # Voice scan (0: off): beams every scan_step_deg of azimuth on the horizon, each heard by the VAD like a
+    # track's; the direction whose beam carries the most speech (VAD probability x denoised beam power,
+    # summed over scan_memory_s of listening) becomes a detection for the tracker (``voice_detections``).
+    # It finds a talker the SRP-PHAT map misses beside a louder machine (README, "The voice scan").
+    scan_step_deg: float = 0.0
+    scan_memory_s: float = 1.0     # listening time (s) the scan's score is averaged over (0.5 / 2 s: the same
+                                   # on the dev rooms)
+    scan_settle_s: float = 2.0     # listening time (s) before the scan's first detection: its score is broad
+                                   # while the MPDR covariance fills (dev rooms: 1 s let early detections 25
+                                   # deg off her start tracks that owned her speech; her track VOICE 84 -> 90 %)
+    scan_power: float = 0.09       # the detection's ``power`` for the tracker: its measurement sigma
+                                   # (TrackerConfig.measurement_sigma: 3.3 deg, a third of a 10 deg step) and a
+                                   # new-source posterior above theta_new
 
     def __post_init__(self) -> None:
+        if not 0 <= self.scan_step_deg <= 90:
+            raise ValueError(f"HearingConfig.scan_step_deg: expected 0 (off) .. 90 deg, got {self.scan_step_deg}")
+        for name in ("scan_memory_s", "scan_settle_s"):
+            if not getattr(self, name) >= 0 or (name == "scan_memory_s" and not self.scan_memory_s > 0):
+                raise ValueError(f"HearingConfig.{name}: expected > 0 s, got {getattr(self, name)}")
+        if not 0 < self.scan_power <= 1:
+            raise ValueError(f"HearingConfig.scan_power: expected in (0, 1], got {self.scan_power}")
         for name in ("rise_per_s", "fall_per_s", "max_log_odds"):
             if not getattr(self, name) > 0:
                 raise ValueError(f"HearingConfig.{name}: expected > 0, got {getattr(self, name)}")
@@ -186,6 +208,12 @@ class Hearing:
         self._level: dict[int, float] = {}   # beam level (dB) per track id, last listening block
         self._listened = 0.0       # s of audio listened to since the start (settle_s)
         self._dir: dict[int, np.ndarray] = {}   # unit direction per track id, last listening block
+        step = config.scan_step_deg
+        az = np.deg2rad(np.arange(-180.0, 180.0, step)) if step > 0 else np.zeros(0)
+        self._scan_dirs = direction_from_angles(az, np.zeros_like(az)).reshape(-1, 3)   # array frame, horizon
+        self._scan_states: list[_TrackState] = []
+        self._scan_score = np.zeros(len(self._scan_dirs))
+        self._scan_detections: list[Detection] = []
 
     def update(self, block: np.ndarray, tracks: Sequence[Track], time: float) -> list[TrackEvidence]:
         cfg = self.config
@@ -203,27 +231,33 @@ class Hearing:
             self._gap = True
             return self._evidence(tracks, ids, time)
         if self._gap:   # a new listening burst: the beams fade in, the VAD starts a new frame
-            for st in self._state.values():
+            for st in [*self._state.values(), *self._scan_states]:
                 st.synthesis.reset()
                 st.vad.pending = st.vad.pending[:0]
             self._gap = False
         dt = x.shape[-1] / SAMPLE_RATE
         self._listened += dt
         directions = np.array([np.asarray(t.direction, float) for t in tracks]).reshape(-1, 3)
-        beams = self.beamformer.process(self._stft.analyse(as_float_audio(x, np.float32)), directions)
+        k = len(tracks)
+        # the scan's beams follow the tracks' in one MPDR call and one VAD batch
+        beams = self.beamformer.process(self._stft.analyse(as_float_audio(x, np.float32)),
+                                        np.concatenate([directions, self._scan_dirs]))
         if not beams.shape[1]:
             return self._evidence(tracks, ids, time)
-        power = beams.real**2 + beams.imag**2        # (k, frames, bins < 4 kHz)
-        mean_power = power.mean(axis=1)              # (k, bins)
+        power = beams.real**2 + beams.imag**2        # (k + scan, frames, bins < 4 kHz)
+        mean_power = power.mean(axis=1)              # (k + scan, bins)
         mean_square = StftStream.power_mean_square(mean_power[:, None])
         levels = 10 * np.log10(np.maximum(mean_square, 1e-30) / FULL_SCALE_SINE_MS)
-        self._level.update(zip(ids, levels.tolist()))
-        if not tracks:
+        self._level.update(zip(ids, levels[:k].tolist()))
+        if not len(beams):
             return self._evidence(tracks, ids, time)
         memory = max(1, int(round(cfg.noise_memory_s / max(dt, StftStream.HOP / SAMPLE_RATE))))
         states = [self._state.get(i) or self._new_state(u, memory) for i, u in zip(ids, directions)]
         self._state.update(zip(ids, states))
-        floors = np.stack([st.noise.update_mean(m) for st, m in zip(states, mean_power)])   # (k, bins)
+        if len(self._scan_dirs) and not self._scan_states:
+            self._scan_states = [self._blank_state(memory) for _ in self._scan_dirs]
+        states = states + self._scan_states
+        floors = np.stack([st.noise.update_mean(m) for st, m in zip(states, mean_power)])   # (k + scan, bins)
         weights = states[0].noise.gains(power, floors[:, None])
         # share of each beam's power above its noise floor (an SNR: the talker's own beam, whose MPDR
         # cancels the machine, has more of it than the machine's beam she leaks into)
@@ -236,6 +270,11 @@ class Hearing:
         slow_db = np.array([st.slow_db for st in states], clean.dtype)
         clean *= (10 ** (np.minimum(cfg.vad_level_db - slow_db, cfg.max_gain_db) / 20))[:, None]
         probs = self.vad.process([st.vad for st in states], list(clean))
+        if len(self._scan_dirs):
+            self._scan(probs[k:], (power[k:] * weights[k:]).mean(axis=(1, 2)), levels[k:], dt)
+        states, probs = states[:k], probs[:k]
+        if not tracks:
+            return self._evidence(tracks, ids, time)
         # Speech heard in several beams at once goes to the beam in which the largest share of the power
         # stands above its noise floor: a talker leaks into a machine's beam (Silero hears speech far
         # below the noise), but there the machine dominates.
@@ -256,11 +295,39 @@ class Hearing:
         self._dir.update(zip(ids, directions))
         return self._evidence(tracks, ids, time)
 
+    def _scan(self, probs: list[np.ndarray], denoised_power: np.ndarray, levels: np.ndarray, dt: float) -> None:
+        """One listening block of the voice scan: per scan beam its frames' mean VAD probability times its
+        denoised power (mean over bins and frames), averaged over ``scan_memory_s`` of listening; if a scan
+        beam heard a speech frame at ``credit_probability`` in this block, the best direction is a detection."""
+        cfg = self.config
+        p = np.array([q.mean() if len(q) else 0.0 for q in probs])
+        follow = 1 - math.exp(-dt / cfg.scan_memory_s)
+        self._scan_score += (p * denoised_power - self._scan_score) * follow
+        if self._listened <= cfg.scan_settle_s or not any(np.any(q >= cfg.credit_probability) for q in probs):
+            return
+        s = self._scan_score
+        j = int(np.argmax(s))
+        # parabolic interpolation between the neighbours (the grid is a circle)
+        a, b, c = s[j - 1], s[j], s[(j + 1) % len(s)]
+        offset = 0.5 * (a - c) / (a - 2 * b + c) if a - 2 * b + c < 0 else 0.0
+        az = math.remainder(math.radians(-180.0 + (j + offset) * cfg.scan_step_deg), 2 * math.pi)
+        self._scan_detections = [Detection(az, 0.0, direction_from_angles(az, 0.0), cfg.scan_power,
+                                           float(levels[j]))]
+
+    def voice_detections(self) -> list[Detection]:
+        """The voice scan's detection since the last call (at most one; ``scan_step_deg`` > 0), for the
+        tracker's next window: the direction on the horizon whose beam carries the most speech."""
+        out, self._scan_detections = self._scan_detections, []
+        return out
+
+    def _blank_state(self, memory: int) -> _TrackState:
+        return _TrackState(self.vad.new_stream(), NoiseFloor(memory), OverlapAdd(self._decimation))
+
     def _new_state(self, direction: np.ndarray, memory: int) -> _TrackState:
         """State of a new track id: its log-odds is that of the nearest known track within
         ``inherit_deg`` (a duplicate of a source already heard: the tracker starts new ids on one machine
         at other elevations, and from the prior they would be undecided until heard), else the prior 0."""
-        st = _TrackState(self.vad.new_stream(), NoiseFloor(memory), OverlapAdd(self._decimation))
+        st = self._blank_state(memory)
         if self._dir and self.config.inherit_deg > 0:
             known = list(self._dir)
             cos = np.array([self._dir[k] for k in known]) @ direction
