@@ -173,7 +173,10 @@ def _hearing_cost(seconds: float, repeats: int) -> dict:
     continuous = {"vad_on_s": 1.0, "vad_period_s": 1.0}
     return {"hearing_4_tracks": _cpu_ms_per_s(runner({}), seconds, repeats),
             "hearing_4_tracks_moving": _cpu_ms_per_s(runner({}, True), seconds, repeats),
-            "hearing_4_tracks_listening_continuously": _cpu_ms_per_s(runner(continuous), seconds, repeats)}
+            "hearing_4_tracks_listening_continuously": _cpu_ms_per_s(runner(continuous), seconds, repeats),
+            # the voice scan (HearingConfig.scan_step_deg): 36 / 24 more beams heard in the same bursts
+            "hearing_4_tracks_voice_scan_10deg": _cpu_ms_per_s(runner({"scan_step_deg": 10.0}), seconds, repeats),
+            "hearing_4_tracks_voice_scan_15deg": _cpu_ms_per_s(runner({"scan_step_deg": 15.0}), seconds, repeats)}
 
 
 def room_frontends(seconds: int = 16) -> dict:

@@ -112,8 +112,10 @@ class HearingConfig:
                                    # (1 s lost windows in the room cases; README, "Cost")
     # Voice scan (0: off): beams every scan_step_deg of azimuth on the horizon, each heard by the VAD like a
     # track's; the direction whose beam carries the most speech (VAD probability x denoised beam power,
-    # summed over scan_memory_s of listening) becomes a detection for the tracker (``voice_detections``).
-    # It finds a talker the SRP-PHAT map misses beside a louder machine (README, "The voice scan").
+    # averaged over scan_memory_s of listening) becomes a detection for the tracker (``voice_detections``).
+    # It finds a talker the SRP-PHAT map misses beside a louder machine (README, "The voice scan"). 15 deg:
+    # the dev rooms' figures equal 10 deg's (and the test rooms'), at 2/3 of the cost; 20 deg lost machine
+    # windows. Off by default: +9.4 ms CPU per second of audio (benchmarks/bench_voice.py).
     scan_step_deg: float = 0.0
     scan_memory_s: float = 1.0     # listening time (s) the scan's score is averaged over (0.5 / 2 s: the same
                                    # on the dev rooms)
@@ -121,15 +123,17 @@ class HearingConfig:
                                    # while the MPDR covariance fills (dev rooms: 1 s let early detections 25
                                    # deg off her start tracks that owned her speech; her track VOICE 84 -> 90 %)
     scan_power: float = 0.09       # the detection's ``power`` for the tracker: its measurement sigma
-                                   # (TrackerConfig.measurement_sigma: 3.3 deg, a third of a 10 deg step) and a
-                                   # new-source posterior above theta_new
+                                   # (TrackerConfig.measurement_sigma: 3.3 deg, about the error of the
+                                   # interpolated peak) and a new-source posterior above theta_new (dev rooms:
+                                   # 0.07 / 0.115 gave her track VOICE 83 / 86 % against 90 %)
 
     def __post_init__(self) -> None:
         if not 0 <= self.scan_step_deg <= 90:
             raise ValueError(f"HearingConfig.scan_step_deg: expected 0 (off) .. 90 deg, got {self.scan_step_deg}")
-        for name in ("scan_memory_s", "scan_settle_s"):
-            if not getattr(self, name) >= 0 or (name == "scan_memory_s" and not self.scan_memory_s > 0):
-                raise ValueError(f"HearingConfig.{name}: expected > 0 s, got {getattr(self, name)}")
+        if not self.scan_memory_s > 0:
+            raise ValueError(f"HearingConfig.scan_memory_s: expected > 0 s, got {self.scan_memory_s}")
+        if not self.scan_settle_s >= 0:
+            raise ValueError(f"HearingConfig.scan_settle_s: expected >= 0 s, got {self.scan_settle_s}")
         if not 0 < self.scan_power <= 1:
             raise ValueError(f"HearingConfig.scan_power: expected in (0, 1], got {self.scan_power}")
         for name in ("rise_per_s", "fall_per_s", "max_log_odds"):
