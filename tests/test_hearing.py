@@ -137,6 +137,8 @@ def test_a_dropped_track_is_forgotten_and_config_errors_name_the_field():
         HearingConfig(inherit_deg=-1)
     with pytest.raises(ValueError, match="HearingConfig.settle_s"):
         HearingConfig(settle_s=-0.5)
+    with pytest.raises(ValueError, match="HearingConfig.scan_step_deg"):
+        HearingConfig(scan_step_deg=-15)
 
 
 def test_a_new_track_beside_a_known_one_starts_from_its_evidence():
@@ -158,6 +160,31 @@ def test_a_new_track_beside_a_known_one_starts_from_its_evidence():
     for k in range(21):
         ev = off.update(noise[:, k * BLOCK:(k + 1) * BLOCK], tracks[:1] if k < 20 else tracks, (k + 1) / 10)
     assert ev[1].voice_probability == 0.5
+
+
+def test_voice_scan_finds_a_talker_beside_a_louder_machine_and_nothing_beside_the_machine_alone():
+    """Free field, plane waves of known direction: a real talker at 40 deg and a real machine recording
+    (data set test part) at -60 deg, 6 dB louder (RMS over the whole 5 s). The voice scan's detections (no
+    tracks given) point at her within 10 deg; with the machine alone it makes none."""
+    fs5 = 5 * FS
+    talk = np.resize(_recording("it_carlo").samples, fs5)     # looped
+    machine = np.resize(_recording("ore_mine").samples, fs5)
+    machine = machine * 2 * np.sqrt(np.mean(talk**2) / np.mean(machine**2))
+    u_her, u_machine = _unit(40), _unit(-60)
+    noise = 1e-4 * np.random.default_rng(6).standard_normal((8, fs5))
+    x_machine = plane_wave(POS, u_machine, machine, FS) + noise
+
+    def scan(x):
+        h, found = Hearing(POS, config=HearingConfig(scan_step_deg=15)), []
+        for k in range(0, fs5, BLOCK):
+            h.update(x[:, k:k + BLOCK], [], (k + BLOCK) / FS)
+            found += h.voice_detections()
+        return found
+    found = scan(x_machine + plane_wave(POS, u_her, talk, FS))
+    errors = [float(np.rad2deg(angular_distance(d.direction, u_her))) for d in found]
+    print("voice scan detections, error from her (deg):", np.round(errors, 1))
+    assert len(errors) >= 5 and max(errors) <= 10, errors
+    assert scan(x_machine) == []
 
 
 # --- reverberant room: a talker and a real machine 6 dB louder ------------------------------------
@@ -204,15 +231,16 @@ def _chain_run(case, sir_db, seconds=16):
     """Per 1 s window (end of it): the evidence of every confirmed track; plus the true directions and
     whether she talks. Localizer with noise suppression, two sources per window, the interference rescan
     (the second source is searched in bins that depart from the recent spatial covariance and rise above
-    their recent power: onsets), the tracking gate."""
+    their recent power: onsets), the tracking gate; the hearing's voice scan (beams every 15 deg, the one
+    carrying the most speech) adds a detection to the tracker's next window."""
     x, directions, she_talks = _room(*case, seconds, sir_db)
     loc = Localizer("cube8", LocalizerConfig(noise_suppression=True, n_sources=2, interference_rescan=True,
                                              min_significance=TRACKING_MIN_SIGNIFICANCE))
-    tracker, hearing, tracks, out = Tracker(), Hearing(POS), [], []
+    tracker, hearing, tracks, out = Tracker(), Hearing(POS, config=HearingConfig(scan_step_deg=15)), [], []
     for k in range(seconds * 10):
         block = x[:, k * BLOCK:(k + 1) * BLOCK]
         for r in loc.process(block):
-            tracks = tracker.update(r.detections, r.time)
+            tracks = tracker.update([*r.detections, *hearing.voice_detections()], r.time)
         ev = hearing.update(block, tracks, (k + 1) / 10)
         if (k + 1) % 10 == 0:
             out.append(ev)
@@ -251,7 +279,13 @@ def _chain_scores(sir_db):
 # inherits its neighbour's evidence, nothing in the first 1 s; chosen on DEV_ROOM_CASES): her track
 # VOICE unchanged (61 %), the machine's NON_VOICE 100/64/100/100/100 % (pooled 93 %). Her column is
 # bounded by her track, present in 57/100/36/100/36 % of her talking seconds (VOICE in 93 % of those):
-# she is detected within 10 deg in only 2-69 % of her 128 ms windows (pooled 26 %).
+# she is detected within 10 deg in only 2-69 % of her 128 ms windows (pooled 26 %). With the hearing's
+# voice scan (MPDR beams every 15 deg on the horizon, VAD on each, the beam with the most VAD probability x
+# denoised power becomes a detection; chosen on DEV_ROOM_CASES): her track present in 86/100/86/100/57 %
+# of her talking seconds (pooled 86 %), VOICE 79/100/79/100/21 % (pooled 76 %), the machine's NON_VOICE
+# unchanged 100/64/100/100/100 % (pooled 93 %). Not met: the scan finds her within 10 deg in 77 % of her
+# talking seconds, none in the first 2 s of listening (scan_settle_s), and the French talker (8 kHz
+# telephony) in 57 % beside the ore mine; fr_june beside industry_light keeps the machine VOICE early.
 # Strict xfail: when the chain meets the issue, it fails.
 @pytest.mark.slow
 @pytest.mark.xfail(strict=True, reason="talker not localized beside a machine 6 dB louder (README figures)")
@@ -265,9 +299,10 @@ def test_real_chain_talker_is_voice_and_louder_machine_is_not_in_a_reverberant_r
     assert np.mean(sum((m for _, m, _ in rows), [])) >= 0.95, report
 
 
-# Measured: a VOICE track within 10 deg of her in 79/64/93/93/57 % of her windows per room, pooled 77 %
-# (43 % without the interference rescan, 63 % with it before the onset weight, 73 % before the hearing's
-# crediting rules; README). Seeded simulation, deterministic: 54 of her 70 windows, the threshold is 49.
+# Measured: a VOICE track within 10 deg of her in 86/86/100/100/79 % of her windows per room, pooled 90 %
+# with the voice scan (77 % before it: 79/64/93/93/57; 43 % without the interference rescan, 63 % with it
+# before the onset weight, 73 % before the hearing's crediting rules; README). Seeded simulation,
+# deterministic: 63 of her 70 windows (54 before the scan), the threshold is 49.
 @pytest.mark.slow
 def test_real_chain_voice_track_within_10_deg_at_0_db_sir():
     rows = _chain_scores(0.0)
