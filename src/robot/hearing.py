@@ -24,6 +24,15 @@ with the noise suppression after it; in the hardest case the suppression keeps h
 all windows where MPDR alone gives 64 %. Why the gain: Silero misses quiet speech (it found no
 speech frames in beams at -50 dB re full scale).
 
+Voice scan (``HearingConfig.scan_step_deg`` > 0, off by default): beams every 15 deg (say) of azimuth on
+the horizon are heard with the tracks' (same STFT, MPDR, suppression, one VAD batch); the direction whose
+beam carries the most speech (mean VAD probability x denoised beam power, averaged over ``scan_memory_s``
+of listening) is a ``Detection`` for the tracker (``voice_detections``) whenever a scan beam hears speech.
+A talker beside a machine 6 dB louder is rarely a peak of the SRP-PHAT map, but her voice is heard in
+the MPDR beams that cancel the machine, most strongly in hers (README, "The voice scan": in the test rooms
+her track then exists in 86 % of her talking seconds instead of 66 %). Cost: +0.39 ms CPU per second of
+audio per scan beam (24 beams at 15 deg: +9.4 ms).
+
 The filter (log-odds L of "this source is a human voice", prior L = 0, i.e. P = 0.5):
   * each 32 ms VAD frame of a track adds ``rise_per_s`` x 0.032 if the frame is speech (VAD probability
     >= 0.5); each non-speech frame of a SOUNDING track (activity >= ``min_activity``) subtracts
