@@ -34,6 +34,7 @@ from ssl_core.tracking import TRACKING_MIN_SIGNIFICANCE, Tracker  # noqa: E402
 
 SETTLE_S = 2
 SECONDS = 16
+LATE_S = 6   # "late" columns: from this second on (after a warm-up of continuous listening)
 BLOCK = FS // 10
 CACHE = Path("/tmp/bench_talker_rooms")
 
@@ -108,6 +109,8 @@ def run(case, sir_db, rooms, cfg: LocalizerConfig, hear: bool, with_talker: bool
         her = [nearest(ev, u_her) for ev, t in scored if t]
         mach = [nearest(ev, u_m) for ev, _ in scored]
         out["voice"] = [e is not None and classify(e) is VoiceClass.VOICE for e in her]
+        her_late = [nearest(ev, u_her) for ev, t in scored[LATE_S - SETTLE_S:] if t]
+        out["voice_late"] = [e is not None and classify(e) is VoiceClass.VOICE for e in her_late]
         out["nonvoice"] = [e is not None and classify(e) is VoiceClass.NON_VOICE for e in mach]
         out["m_track"] = [e is not None for e in mach]
         out["her_track"] = [e is not None for e in her]
@@ -125,7 +128,7 @@ def _row(name: str, r: dict) -> str:
         return f"{100 * np.mean(r[k]):.0f}" if len(r[k]) else "-"
     return (f"| {name} | {pct('det6')} / {pct('det0')} | {pct('mdet6')} | {pct('ghost6')} / {pct('ghost0')} | "
             f"{pct('htrack')} | {pct('voice')} | {pct('mtrack')} | {pct('nonvoice')} | {pct('near')} | "
-            f"{pct('scan6')} / {pct('scan0')} | {pct('scanoff6')} | {len(r['scanalone'])} |")
+            f"{pct('scan6')} / {pct('scan0')} | {pct('scanoff6')} | {len(r['scanalone'])} | {pct('voicelate')} |")
 
 
 def main() -> None:
@@ -147,8 +150,8 @@ def main() -> None:
     print(f"rooms={args.rooms} overrides={over} hearing={hear_over}")
     print("| room | her det -6 / 0 dB | machine det -6 | ghost -6 / 0 dB | her track -6 | her VOICE -6 | "
           "machine track -6 | machine NON_VOICE -6 | VOICE within 10 deg, 0 dB | voice scan on her -6 / 0 dB | "
-          "scan detections off her -6 | scan detections, machine alone |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "scan detections off her -6 | scan detections, machine alone | her VOICE -6, from 6 s |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for case in cases:
         a = run(case, -6.0, args.rooms, cfg, not args.quick, hearing_config=hcfg)
         b = run(case, 0.0, args.rooms, cfg, not args.quick, hearing_config=hcfg)
@@ -157,7 +160,7 @@ def main() -> None:
                "ghost0": b["ghost"], "htrack": a.get("her_track", []), "voice": a.get("voice", []),
                "mtrack": a.get("m_track", []), "nonvoice": a.get("nonvoice", []), "near": b.get("near", []),
                "scan6": a.get("scan_her", []), "scan0": b.get("scan_her", []), "scanoff6": a.get("scan_off", []),
-               "scanalone": c.get("scan_off", [])}
+               "scanalone": c.get("scan_off", []), "voicelate": a.get("voice_late", [])}
         for k, v in row.items():
             pooled.setdefault(k, []).extend(v)
         print(_row(str(case), row), flush=True)

@@ -131,6 +131,9 @@ class HearingConfig:
     scan_settle_s: float = 2.0     # listening time (s) before the scan's first detection: its score is broad
                                    # while the MPDR covariance fills (dev rooms: 1 s let early detections 25
                                    # deg off her start tracks that owned her speech; her track VOICE 84 -> 90 %)
+    scan_min_probability: float = 0.75  # a detection needs a frame at this VAD probability in a scan beam in the
+                                        # block (dev rooms, 0.5 / 0.75 / 0.9: her track VOICE 88 / 90 / 90 %,
+                                        # scan detections with the machine alone 11 / 2 / 0 in 112 s)
     scan_power: float = 0.09       # the detection's ``power`` for the tracker: its measurement sigma
                                    # (TrackerConfig.measurement_sigma: 3.3 deg, about the error of the
                                    # interpolated peak) and a new-source posterior above theta_new (dev rooms:
@@ -143,6 +146,9 @@ class HearingConfig:
             raise ValueError(f"HearingConfig.scan_memory_s: expected > 0 s, got {self.scan_memory_s}")
         if not self.scan_settle_s >= 0:
             raise ValueError(f"HearingConfig.scan_settle_s: expected >= 0 s, got {self.scan_settle_s}")
+        if not SPEECH_THRESHOLD <= self.scan_min_probability <= 1:
+            raise ValueError(f"HearingConfig.scan_min_probability: expected {SPEECH_THRESHOLD}..1, "
+                             f"got {self.scan_min_probability}")
         if not 0 < self.scan_power <= 1:
             raise ValueError(f"HearingConfig.scan_power: expected in (0, 1], got {self.scan_power}")
         for name in ("rise_per_s", "fall_per_s", "max_log_odds"):
@@ -311,12 +317,12 @@ class Hearing:
     def _scan(self, probs: list[np.ndarray], denoised_power: np.ndarray, levels: np.ndarray, dt: float) -> None:
         """One listening block of the voice scan: per scan beam its frames' mean VAD probability times its
         denoised power (mean over bins and frames), averaged over ``scan_memory_s`` of listening; if a scan
-        beam heard a speech frame at ``credit_probability`` in this block, the best direction is a detection."""
+        beam heard a speech frame at ``scan_min_probability`` in this block, the best direction is a detection."""
         cfg = self.config
         p = np.array([q.mean() if len(q) else 0.0 for q in probs])
         follow = 1 - math.exp(-dt / cfg.scan_memory_s)
         self._scan_score += (p * denoised_power - self._scan_score) * follow
-        if self._listened <= cfg.scan_settle_s or not any(np.any(q >= cfg.credit_probability) for q in probs):
+        if self._listened <= cfg.scan_settle_s or not any(np.any(q >= cfg.scan_min_probability) for q in probs):
             return
         s = self._scan_score
         j = int(np.argmax(s))
