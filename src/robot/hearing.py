@@ -133,7 +133,8 @@ class HearingConfig:
                                    # deg off her start tracks that owned her speech; her track VOICE 84 -> 90 %)
     scan_min_probability: float = 0.75  # a detection needs a frame at this VAD probability in its beam in the
                                         # block (dev rooms, 0.5 / 0.75 / 0.9: her track VOICE 88 / 90 / 90 %,
-                                        # scan detections with the machine alone 11 / 2 / 0 in 112 s)
+                                        # scan detections with the machine alone 11 / 2 / 0 in 112 s; measured
+                                        # with the gate on any scan beam's frames)
     scan_power: float = 0.09       # the detection's ``power`` for the tracker: its measurement sigma
                                    # (TrackerConfig.measurement_sigma: 3.3 deg, about the error of the
                                    # interpolated peak) and a new-source posterior above theta_new (dev rooms:
