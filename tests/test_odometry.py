@@ -173,11 +173,11 @@ def test_yaw_rate_must_be_finite():
 
 
 # ----------------------------------------------------------------------------- wheel load (commanded speeds)
-def _drive(true_twist, wheel_speeds, n=40, dt=0.05, travel=TravelConfig()):
+def _drive(true_twist, wheel_speeds, n=40, dt=0.05):
     """The base truly moves with ``true_twist`` (the gyro reads its yaw rate) under the command ``true_twist``
     while the encoders turn at ``wheel_speeds`` (rad/s) for ``n`` control intervals; the odometry told the command
     as ``Motion`` tells it (at each command, and a stop at the last reading). Returns (commanded, uncommanded)."""
-    told, blind = Odometry(P, travel=travel), Odometry(P)
+    told, blind = Odometry(P), Odometry(P)
     angles, t = np.zeros(3), 0.0
     for i in range(n + 1):
         r = WheelOdometry(t, angles.copy(), np.asarray(wheel_speeds, float))
@@ -209,17 +209,26 @@ def test_held_base_with_every_wheel_loaded_makes_no_travel():
 
 def test_one_slipping_wheel_is_left_out_of_the_translation():
     """The base truly moves sideways at 0.2 m/s without turning, as commanded; wheel 0 spins 1.5 rad/s faster than
-    it rolls (lifted on debris), so the wheels' yaw (+0.2 rad/s) disagrees with the gyro's (0): slip. The two
-    gripping wheels with the gyro's yaw give the true motion exactly (all of it kept when so configured; the default
-    keeps half, the mean share for one loaded wheel); without a command the travel is dropped."""
+    it rolls (lifted on debris), so the wheels' yaw (+0.2 rad/s) disagrees with the gyro's (0): slip. The two wheels
+    that track their commands, with the gyro's yaw, give the true motion exactly; without a command the slipping
+    intervals' travel is dropped."""
     truth = (0.0, 0.2, 0.0)
     w = inverse_kinematics(truth, P) + np.array([1.5, 0.0, 0.0])
-    exact, blind = _drive(truth, w, travel=TravelConfig(keep_slipping=(1.0, 1.0, 1.0, 1.0)))
-    np.testing.assert_allclose(exact.pose, [0.0, 0.4, 0.0], atol=1e-9)
-    assert exact.slip_intervals == 40
+    told, blind = _drive(truth, w)
+    np.testing.assert_allclose(told.pose, [0.0, 0.4, 0.0], atol=1e-9)
+    assert told.slip_intervals == 40 and told.loaded_intervals == 40
     np.testing.assert_allclose(blind.pose, [0.0, 0.0, 0.0], atol=1e-9)
-    half, _ = _drive(truth, w)
-    np.testing.assert_allclose(half.pose, [0.0, TravelConfig().keep_slipping[1] * 0.4, 0.0], atol=1e-9)
+
+
+def test_one_free_wheel_gives_the_motion_along_its_rolling_direction():
+    """Commanded and truly moving at (0.05, 0.3) m/s without turning, wheels 0 and 2 held to 40 % of their commands
+    (2.1 and 3.9 rad/s: loaded); the rear wheel 1 rolls freely (rolling direction -y in the body frame). The
+    translation is the true motion's component along -y (0.6 m in 2 s); the x part, which only the loaded wheels
+    saw, is not credited."""
+    truth = np.array([0.05, 0.3, 0.0])
+    w = inverse_kinematics(truth, P) * np.array([0.4, 1.0, 0.4])
+    told, _ = _drive(tuple(truth), w)
+    np.testing.assert_allclose(told.pose, [0.0, 0.6, 0.0], atol=1e-9)
 
 
 def test_command_is_averaged_over_the_interval():
@@ -238,10 +247,6 @@ def test_command_is_averaged_over_the_interval():
 def test_bad_travel_config_is_named():
     with pytest.raises(ValueError, match="loaded_speed"):
         TravelConfig(loaded_speed=0.0)
-    with pytest.raises(ValueError, match="keep_gripping"):
-        TravelConfig(keep_gripping=(1.0, 0.5, 0.0))
-    with pytest.raises(ValueError, match="keep_slipping"):
-        TravelConfig(keep_slipping=(1.0, 0.5, 0.0, 1.5))
 
 
 @pytest.mark.slow

@@ -25,22 +25,18 @@ is its bias integrated over the driving time. So:
   slipped (a wheel pressing on rubble below the bumper turns in place while the base stays put: measured in
   light rubble, 0.5 m of false travel in 4 s without a bumper or stall signal).
 
-Translation is the wheels', turned by the fused heading. How much of it an interval keeps depends on the wheels'
-**load** when the caller says what the drive was commanded (``commanded``; ``TravelConfig``): a wheel whose mean
-speed over the interval (encoder increment / interval, what the firmware's 50 ms count window gives too) is more than
-``loaded_speed`` off its mean commanded speed works against a resistance its speed loop cannot overcome (the base
-pushes debris or a wall, or rubble drags that wheel). The base may then be held or moving slower than the wheels say;
-the wheels cannot tell which (measured in light rubble: in such intervals the base made 40-70 % of the wheels'
-travel on average, from nothing to all of it), so the interval keeps a fraction of it that depends on how many
-wheels are loaded:
-
-* the wheels' yaw agrees with the gyro: ``keep_gripping[n]`` of the wheels' translation, ``n`` loaded wheels;
-* they slipped: with the yaw known, the three wheels hold one spare equation, so each pair of wheels gives the
-  translation on its own; the pair without the wheel furthest off its command is taken (the slip is most likely
-  there), times ``keep_slipping[n]``.
-
+Translation is the wheels', turned by the fused heading, from the wheels that are not **loaded** when the caller
+says what the drive was commanded (``commanded``; ``TravelConfig``). A wheel whose mean speed over the interval
+(encoder increment / interval, what the firmware's 50 ms count window gives too) is more than ``loaded_speed`` off
+its mean commanded speed works against a resistance its speed loop cannot overcome: the base pushes debris or a wall,
+or rubble drags that wheel. Its encoder then over-reports the base's motion (measured in light rubble: in intervals
+with loaded wheels the base made 40-70 % of the three wheels' translation on average, from nothing to all of it).
+A free wheel rolls: its rim speed is the base's velocity along its rolling direction plus base_radius x yaw rate.
+With the yaw from the gyro, each free wheel thus fixes one component of the base's motion; the translation is the
+smallest one consistent with the free wheels (three: the least-squares fit, which ignores a slip common to all
+three, as that is yaw; two: exact; one: along its rolling direction only; none: the base is held, no travel).
 Without a command (``commanded`` never called: a caller that does not drive) the wheels' translation is kept,
-dropped when they slip.
+dropped when their yaw slips.
 """
 from __future__ import annotations
 
@@ -100,29 +96,19 @@ class GyroFusionConfig:
 
 @dataclass(frozen=True)
 class TravelConfig:
-    """How much of the wheels' translation an interval keeps when wheels are loaded (module docstring).
+    """Which wheels the translation trusts (module docstring).
 
-    Measured on the rescue in light rubble (seeds 0-7, 200 s, every control interval against MuJoCo's base motion,
-    ``ssl_sim.runner.odometry_drift`` logs): the base made, of the wheels' translation, 99 % with no wheel loaded,
-    64 % / 61 % / 47 % with 1 / 2 / 3 loaded while the wheels' yaw agreed with the gyro; of the chosen pair's
-    translation while they slipped 80 % / 73 % / 40 % / 15 %. The fractions below are these rounded to none, half or
-    all: replaying the logged readings, they gave the lowest end-of-run errors of the roundings tried on seeds 0-7
-    (largest 0.24 m against 0.36 m with slipping travel dropped and nothing else, mean 0.13 against 0.20 m), and held
-    on seeds 8-15 (0.28 against 0.31 m, mean 0.11 against 0.12 m); the unrounded fractions minimise each interval's
-    error but not their sum (a held base accrues a bias interval after interval: 0.40 m on seed 8)."""
+    ``loaded_speed``: rad/s between a wheel's mean speed and its mean command over an interval beyond which the wheel
+    is loaded. Its speed loop (0.5 N m s/rad) then pushes with 0.25 N m, a quarter of the stall torque; a wheel
+    rolling freely tracks within 0.1-0.2 rad/s. Measured in light rubble (``ssl_sim.runner.odometry_drift`` runs,
+    every control interval's encoders and commands logged, replayed against MuJoCo's end pose; seeds 0-15, 200 s):
+    largest end error 0.18 / 0.20 / 0.30 / 0.56 m with 0.4 / 0.5 / 0.6 / 0.75 rad/s, mean 0.10 / 0.09 / 0.10 / 0.18 m,
+    against 0.36 m and 0.16 m with the slipping intervals' travel dropped and the wheels trusted otherwise."""
 
-    loaded_speed: float = 0.5                  # rad/s off the command that makes a wheel loaded: its speed loop
-    #                                            (0.5 N m s/rad) then pushes with 0.25 N m, a quarter of the stall
-    #                                            torque; a free-rolling wheel tracks within 0.1-0.2 rad/s (measured)
-    keep_gripping: tuple[float, ...] = (1.0, 0.5, 0.5, 0.0)   # by the number of loaded wheels (0-3), no yaw slip
-    keep_slipping: tuple[float, ...] = (1.0, 0.5, 0.0, 0.0)   # by the number of loaded wheels, yaw slip (pair fit)
+    loaded_speed: float = 0.5
 
     def __post_init__(self) -> None:
         need(self, self.loaded_speed > 0, "loaded_speed", "> 0 rad/s")
-        for name in ("keep_gripping", "keep_slipping"):
-            v = getattr(self, name)
-            need(self, len(v) == 4 and all(0.0 <= k <= 1.0 for k in v), name,
-                 "4 fractions in [0, 1] (for 0-3 loaded wheels)")
 
 
 class Odometry:
@@ -254,22 +240,20 @@ class Odometry:
 
     def _translation(self, d_angles: np.ndarray, step: np.ndarray, dt: float,
                      command: np.ndarray | None) -> np.ndarray:
-        """Body-frame (dx, dy) (m) the interval keeps: ``step`` is the wheels' (dx, dy, fused dyaw), ``d_angles``
+        """Body-frame (dx, dy) (m) of one interval: ``step`` is the wheels' (dx, dy) and the fused dyaw, ``d_angles``
         the encoder increments (rad), ``command`` the mean commanded wheel speeds (rad/s) or None."""
         driven = command is not None and 0.0 < dt <= self.gyro.max_gyro_dt_s and bool(np.any(command != 0.0))
         if not driven:
             return np.zeros(2) if self.slipping else step[:2]
-        cfg = self.travel
-        off = np.abs(d_angles / dt - command)
-        n_loaded = int(np.count_nonzero(off > cfg.loaded_speed))
-        self.loaded_intervals += n_loaded > 0
-        if not self.slipping:
-            return cfg.keep_gripping[n_loaded] * step[:2]
-        keep = [i for i in range(3) if i != int(np.argmax(off))]
+        free = np.abs(d_angles / dt - command) <= self.travel.loaded_speed
+        if free.all():
+            return step[:2]                  # the least-squares fit of all three (forward kinematics)
+        self.loaded_intervals += 1
+        if not free.any():
+            return np.zeros(2)
         jac = self.params.jacobian
-        # The two wheels' rolling equations with the yaw increment fixed: J[i, :2] . (dx, dy) = d_i - J[i, 2] dyaw.
-        pair = np.linalg.solve(jac[keep, :2], d_angles[keep] - jac[keep, 2] * step[2])
-        return cfg.keep_slipping[n_loaded] * pair
+        # Free wheel i rolls: J[i, :2] . (dx, dy) = d_i - J[i, 2] dyaw; the smallest (dx, dy) that satisfies them.
+        return np.linalg.pinv(jac[free, :2]) @ (d_angles[free] - jac[free, 2] * step[2])
 
     def _fused_yaw(self, wheel_dyaw: float, rate: float, dt: float) -> tuple[float, bool]:
         """(heading increment, slipped) for one interval while not standing."""
