@@ -256,7 +256,7 @@ def test_gyro_aided_odometry_against_mujoco_truth_in_light_rubble(seed):
     pressing on rubble below the bumper; it keeps exploring after the last find): the behaviour's gyro-aided
     odometry against MuJoCo's true pose at the end of the run within the issue's 3 deg and 0.3 m, on the eight
     seeds of the issue's benchmark (about 11 s of CPU each). With the current behaviour every run lasts 200 s;
-    the end errors are 0.03-0.91 deg and 0.05-0.16 m (0.06-0.36 m with every wheel trusted while it grips,
+    the end errors are 0.03-0.71 deg and 0.05-0.16 m (0.06-0.36 m with every wheel trusted while it grips,
     before the loaded-wheel rule). (Wheels alone on the same readings are printed, not asserted.)"""
     from ssl_sim.runner import odometry_drift
 
