@@ -247,6 +247,8 @@ def test_command_is_averaged_over_the_interval():
 def test_bad_travel_config_is_named():
     with pytest.raises(ValueError, match="loaded_speed"):
         TravelConfig(loaded_speed=0.0)
+    with pytest.raises(ValueError, match="twist"):
+        Odometry(P).commanded(0.0, (0.1, float("nan"), 0.0))
 
 
 @pytest.mark.slow

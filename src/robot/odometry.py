@@ -181,10 +181,13 @@ class Odometry:
         ``time`` (s, the readings' clock) on; the odometry turns it into wheel speeds as the drive does (inverse
         kinematics with direction-keeping saturation) and compares each interval's mean against the encoders."""
         t = float(time)
+        tw = None if twist is None else np.asarray(twist, dtype=float)
+        if tw is not None and (tw.shape != (3,) or not np.all(np.isfinite(tw))):
+            raise ValueError(f"twist: expected 3 finite numbers (vx m/s, vy m/s, omega rad/s) or None, got {twist!r}")
         if self._command is not None:
             self._command_sum += self._command * max(0.0, t - self._command_since)
         self._command_since = max(t, self._command_since)
-        self._command = np.zeros(3) if twist is None else twist_to_wheels(np.asarray(twist, dtype=float), self.params)
+        self._command = np.zeros(3) if tw is None else twist_to_wheels(tw, self.params)
 
     def _mean_command(self, t0: float, t1: float) -> np.ndarray | None:
         """Mean commanded wheel speeds (rad/s) over the reading interval ``[t0, t1]``; None if never told."""
