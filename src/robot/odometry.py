@@ -99,8 +99,11 @@ class TravelConfig:
     """Which wheels the translation trusts (module docstring).
 
     ``loaded_speed``: rad/s between a wheel's mean speed and its mean command over an interval beyond which the wheel
-    is loaded. Its speed loop (0.5 N m s/rad) then pushes with 0.25 N m, a quarter of the stall torque; a wheel
-    rolling freely tracks within 0.1-0.2 rad/s. Measured in light rubble (``ssl_sim.runner.odometry_drift`` runs,
+    is loaded. In the simulator the wheels run under a speed loop (``ssl_sim`` robot model: 0.5 N m s/rad), which
+    then pushes with 0.25 N m, a quarter of the stall torque; a wheel rolling freely tracks within 0.1-0.2 rad/s.
+    The firmware drives open loop (duty proportional to the command), where the motor's back-EMF acts as a softer
+    loop (stall torque / no-load speed, about 0.05 N m s/rad for 1 N m and 20 rad/s): the same 0.25 N m is then about
+    5 rad/s off the command. Measure it on the robot before trusting this default there. Measured in light rubble (``ssl_sim.runner.odometry_drift`` runs,
     every control interval's encoders and commands logged, replayed against MuJoCo's end pose; seeds 0-15, 200 s):
     largest end error 0.18 / 0.20 / 0.30 / 0.56 m with 0.4 / 0.5 / 0.6 / 0.75 rad/s, mean 0.10 / 0.09 / 0.10 / 0.18 m,
     against 0.36 m and 0.16 m with the slipping intervals' travel dropped and the wheels trusted otherwise."""
