@@ -6,7 +6,7 @@ At the end: the behaviour's gyro-aided pose and a wheels-only odometry fed the s
 the true pose; the simulated gyro's bias (it drifts) and the odometry's standstill estimate of it. Seeds run one
 after the other on one core (BLAS threads capped at 1).
 
-Prints a table and one JSON line. Run: ``.venv/bin/python benchmarks/bench_odometry.py [--seeds 0,1,2,3]``.
+Prints a table and one JSON line. Run: ``.venv/bin/python benchmarks/bench_odometry.py [--seeds 0,1,2,3,4,5,6,7]``.
 Target (issue 13): heading error <= 3 deg and position error <= 0.3 m after 200 s on every seed.
 """
 from __future__ import annotations
@@ -25,7 +25,7 @@ from ssl_sim.runner import odometry_drift  # noqa: E402
 
 def main(argv=None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("--seeds", default="0,1,2,3", help="comma-separated seeds")
+    ap.add_argument("--seeds", default="0,1,2,3,4,5,6,7", help="comma-separated seeds")
     ap.add_argument("--duration", type=float, default=200.0, help="simulated seconds per run")
     ap.add_argument("--scenario", default="light_rubble_three")
     args = ap.parse_args(argv)
@@ -37,18 +37,19 @@ def main(argv=None) -> int:
             rows.append(odometry_drift(args.scenario, seed, args.duration))
     print(f"bench_odometry: {args.scenario}, {args.duration:g} s per seed, end pose against MuJoCo truth")
     print(f"{'seed':>4} {'bumps':>5} {'heading deg':>11} {'pos m':>6} {'wheels deg':>10} {'wheels m':>8} "
-          f"{'bias deg/s':>10} {'estimate':>8} {'ZUPTs':>5} {'slips':>5} {'CPU s':>6}")
+          f"{'bias deg/s':>10} {'estimate':>8} {'ZUPTs':>5} {'slips':>5} {'loaded':>6} {'CPU s':>6}")
     for r in rows:
         print(f"{r['seed']:>4} {r['bumper_recoveries']:>5} {r['heading_error_deg']:>11.2f} "
               f"{r['position_error_m']:>6.3f} {r['wheels_heading_error_deg']:>10.2f} "
               f"{r['wheels_position_error_m']:>8.3f} {r['gyro_bias_deg_s']:>10.4f} "
               f"{r['gyro_bias_estimate_deg_s']:>8.4f} {r['bias_updates']:>5} {r['slip_intervals']:>5} "
+              f"{r['loaded_intervals']:>6} "
               f"{r['cpu_s']:>6.1f}")
     met = all(r["heading_error_deg"] <= 3.0 and r["position_error_m"] <= 0.3 for r in rows)
     print(f"target (<= 3 deg and <= 0.3 m on every seed): {'met' if met else 'NOT met'}")
     keys = ("seed", "sim_time_s", "bumper_recoveries", "heading_error_deg", "position_error_m",
             "wheels_heading_error_deg", "wheels_position_error_m", "gyro_bias_deg_s", "gyro_bias_estimate_deg_s",
-            "bias_updates", "slip_intervals", "cpu_s")
+            "bias_updates", "slip_intervals", "loaded_intervals", "cpu_s")
     print(json.dumps({"bench": "odometry", "scenario": args.scenario, "duration_s": args.duration, "target_met": met,
                       "runs": [{k: (round(r[k], 4) if isinstance(r[k], float) else r[k]) for k in keys}
                                for r in rows]}))

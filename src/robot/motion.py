@@ -78,6 +78,16 @@ class Motion:
         self.drive, self.clock, self.odometry, self.config, self.fatal = drive, clock, odometry, config, fatal
         self._slips = 0
 
+    def _drive(self, vx: float, vy: float, omega: float) -> None:
+        """Command a body twist and tell the odometry (it compares the wheels against the command)."""
+        self.drive.set_twist(vx, vy, omega)
+        self.odometry.commanded(self.clock.now(), (vx, vy, omega))
+
+    def stop(self) -> None:
+        """Stop the drive (and tell the odometry)."""
+        self.drive.stop()
+        self.odometry.commanded(self.clock.now(), None)
+
     def update_odometry(self, stationary: bool = False):
         """Read encoders and gyro into the odometry; ``stationary``: the drive stands as commanded (every
         primitive has stopped it), so the odometry may learn the gyro's bias (zero-velocity update)."""
@@ -86,7 +96,7 @@ class Motion:
     def stand(self, seconds: float) -> None:
         """Stand still (drive stopped) for ``seconds``, reading the odometry every control tick: the braking
         is tracked and, once the wheels stand, each tick is a zero-velocity update of the gyro's bias."""
-        self.drive.stop()
+        self.stop()
         t_end = self.clock.now() + seconds
         while (left := t_end - self.clock.now()) > 1e-9:
             self.clock.sleep(min(self.config.control_dt, left))
@@ -104,7 +114,7 @@ class Motion:
         elif self._slips >= self.config.slip_intervals:
             kind = "slip"
         if kind is not None:
-            self.drive.stop()
+            self.stop()
             self.update_odometry()
             raise Blocked(kind, st, heading_world)
 
@@ -127,14 +137,14 @@ class Motion:
                 if abs(remaining) <= math.radians(1.0) or self.clock.now() >= t_end:
                     break
                 omega = math.copysign(min(cfg.turn_speed, max(0.25, 2.5 * abs(remaining))), remaining)
-                self.drive.set_twist(0.0, 0.0, omega)
+                self._drive(0.0, 0.0, omega)
                 self.clock.sleep(cfg.control_dt)
                 self._check(True, yaw)
                 if watch.stalled(self.clock.now(), float(self._tick_odometry()[2]), abs(omega)):
-                    self.drive.stop()
+                    self.stop()
                     raise Blocked("stall", DriveStatus(stalled=True), yaw)
         finally:
-            self.drive.stop()
+            self.stop()
         self.update_odometry()
 
     def translate(self, heading: float, distance: float, speed: float | None = None,
@@ -161,16 +171,16 @@ class Motion:
                     break
                 v = min(speed, max(0.05, 2.0 * remaining))
                 rel = heading - (yaw - yaw0)  # hold the start yaw: the direction in the body frame turns back
-                self.drive.set_twist(v * math.cos(rel), v * math.sin(rel), -2.0 * (yaw - yaw0))
+                self._drive(v * math.cos(rel), v * math.sin(rel), -2.0 * (yaw - yaw0))
                 self.clock.sleep(cfg.control_dt)
                 armed = armed or not self.drive.status().bumper
                 self._check(armed, world_heading)
                 x, y, _ = self._tick_odometry()
                 if watch.stalled(self.clock.now(), (x - x0) * ux + (y - y0) * uy, v):
-                    self.drive.stop()
+                    self.stop()
                     raise Blocked("stall", DriveStatus(stalled=True), world_heading)
         finally:
-            self.drive.stop()
+            self.stop()
         self.update_odometry()
         return done
 

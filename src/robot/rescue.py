@@ -306,7 +306,7 @@ class RescueBehaviour:
             self._recover(Blocked("bumper" if status.bumper else "stall", status, float(self.pose[2])),
                           "at the start of a cycle")
             return
-        self.drive.stop()
+        self.motion.stop()
         heard = self._listen()
         if self._found_check(heard) or self.done:
             return

@@ -567,7 +567,8 @@ def odometry_drift(scenario: Scenario | str | Path, seed: int, duration_s: float
             "wheels_heading_error_deg": hw, "wheels_position_error_m": pw,
             "gyro_bias_deg_s": round(math.degrees(run.drive.gyro_bias), 4),
             "gyro_bias_estimate_deg_s": round(math.degrees(beh.odometry.gyro_bias), 4),
-            "bias_updates": beh.odometry.bias_updates, "slip_intervals": beh.odometry.slip_intervals}
+            "bias_updates": beh.odometry.bias_updates, "slip_intervals": beh.odometry.slip_intervals,
+            "loaded_intervals": beh.odometry.loaded_intervals}
 
 
 def format_summary(result: dict) -> str:
