@@ -477,6 +477,18 @@ class SoundMap:
         if src.state is SourceState.FOUND:
             src.found_time = self.time if time is None else float(time)
 
+    def restart_from(self, source_id: int, xy, radius_m: float = DISTINCT_POSES_M) -> int:
+        """Keep only the listens of a source heard within ``radius_m`` (horizontally) of ``xy`` (world m) and
+        refit: the behaviour's verdict that the bearings heard here, close to its estimate, refute the older ones
+        (two callers' rays that crossed into one ghost, a reflection). Returns the number of listens kept."""
+        src = self._get(source_id)
+        keep = [r for r in src.rays if math.hypot(r.origin[0] - xy[0], r.origin[1] - xy[1]) <= radius_m]
+        if not keep:
+            raise ValueError(f"xy: source {source_id} was never heard within {radius_m} m of {tuple(xy)!r}")
+        src.rays = keep
+        self._refit(src)
+        return len(keep)
+
     def add_found(self, position, time: float) -> int:
         """Record a source found without having been mapped (e.g. touched): a found source at ``position``."""
         p = np.asarray(position, float).reshape(-1)
