@@ -500,16 +500,24 @@ class RescueBehaviour:
                                 "an interferer, not a victim")
                 continue
             if steep_cue and d > cfg.found_exclusion_m:
-                # A mouth heard right below, the map's estimate of it far off: the steep bearing joined a source
-                # mapped from afar (measured, light rubble: a caller found 2.4 m from the estimate it was reported
-                # at, which then excluded the caller there). The listens from here say where it is.
-                self.map.restart_from(sid, xy)
-                self._restarted.add(sid)
-                s = self.map.source(sid)
-                crit += f"; re-estimated from the listens here (the map had it {d:.2f} m away)"
+                # A mouth heard right below, but the source this bearing joined is mapped far off: the bearing is
+                # another caller's (measured, light rubble seed 9: a caller heard at -36 deg joined the source of
+                # one 2.4 m away, was reported there, and that caller was then excluded as found). The steep
+                # bearing itself says where she is: where it meets the floor.
+                self._cue.pop(sid, None)
+                s = self.map.source(self.map.add_found(self._floor_point(ev), self.clock.now()))
+                crit += f"; where this bearing meets the floor (the source it joined is mapped {d:.2f} m away)"
             self._declare_found(s, crit)
             return True
         return False
+
+    def _floor_point(self, ev: ListenEvidence) -> np.ndarray:
+        """Where a bearing heard now (pointing down) meets the map's prior source height: world (x, y, z) m."""
+        x, y, yaw = self.pose
+        h = self.config.array_height_m - self.map.config.source_height_m
+        r = h / max(math.tan(-ev.elevation), 1e-3)
+        a = yaw + ev.azimuth
+        return np.array([x + r * math.cos(a), y + r * math.sin(a), self.map.config.source_height_m])
 
     def _floor_echo(self, ev: ListenEvidence) -> bool:
         """A steep bearing heard in the same listen as a shallower one below the horizon within
