@@ -4,9 +4,11 @@ import math
 
 import numpy as np
 
+from robot.hal import DriveStatus
+
 from robot.rescue import Decision, RescueConfig
 from robot.sound_map import SoundMap, SoundMapConfig
-from test_rescue import Det, FakeLocalizer, Result, Source, World, found_events, make
+from test_rescue import Det, FakeLocalizer, Result, Source, World, WorldDrive, found_events, make
 
 H = SoundMapConfig().array_height_m
 
@@ -93,3 +95,31 @@ def test_an_estimate_heard_level_from_close_up_is_re_estimated_and_the_caller_fo
     x, y, _ = w.pose()
     assert math.hypot(x - caller.position[0], y - caller.position[1]) <= 0.75
     assert math.dist(found[0].data["position"], caller.position[:2]) < 0.3
+
+
+def test_wedged_on_debris_turns_in_place_and_moves_on_instead_of_stuck():
+    class Wedged(WorldDrive):
+        """A wheel against a debris plate: the drive reports every translation stalled (the bumper free) until
+        the robot has turned in place; then the wheels meet the plate at other angles and it drives."""
+
+        freed = False
+
+        def set_twist(self, vx, vy, omega):
+            if vx == 0.0 and vy == 0.0 and omega != 0.0:
+                self.freed = True
+            super().set_twist(vx, vy, omega)
+
+        def status(self):
+            st = super().status()
+            moving = any(c.twist[0] or c.twist[1] for c in self.commands[-1:])
+            return DriveStatus(bumper=st.bumper, stalled=moving and not self.freed)
+
+    w = World([Source((3.0, 0.0, 0.1), 65.0)])
+    w.drive = Wedged(w, (0.0, 0.0, 0.0))
+    b = make(w, RescueConfig(max_victims=1))
+    ev = b.run(max_time=120.0)
+    assert not any(e.decision is Decision.STUCK for e in ev)
+    assert any(e.decision is Decision.RECOVER and "after turning in place" in e.reason for e in ev)
+    assert ev[-1].decision is Decision.ALL_FOUND
+    x, y, _ = w.pose()
+    assert math.hypot(x - 3.0, y) <= 0.75           # truth: it drove on to the caller
