@@ -49,7 +49,7 @@ from robot.occupancy import OccupancyConfig, OccupancyGrid
 from robot.odometry import Odometry, wrap_angle
 from robot.planner import Plan, Planner, PlannerConfig
 from robot.protocol import FAULT_NAMES
-from robot.sound_map import MapSource, SoundMap, SoundMapConfig, SourceClass, SourceState
+from robot.sound_map import DISTINCT_POSES_M, MapSource, SoundMap, SoundMapConfig, SourceClass, SourceState
 
 log = logging.getLogger(__name__)
 
@@ -124,11 +124,12 @@ class RescueConfig:
     #                                        0.71 m, 1.03 vs 1.05 m, 0.87 vs 0.81 m, 0.45-0.58 vs 0.32-0.51 m);
     #                                        the two heard at -11 and -13 deg were false founds 1.05 and 0.81 m
     #                                        from the caller behind the slab (half_buried_slab seeds 1, 3)
-    echo_azimuth_deg: float = 30.0         # a steep bearing with a shallower one below the horizon (< reach_
-    #                                        elevation_deg) this close in azimuth in the same listen is the floor's
-    #                                        echo, no found cue (measured, seeds 0-15 of two versions: 12 such pairs
-    #                                        heard 0.99-1.6 m from the nearest caller in 10, 0.4 m in 2; the 3 false
-    #                                        founds among them by criteria 1-2)
+    echo_azimuth_deg: float = 30.0         # a steep bearing heard from the spot where a shallower one below the
+    #                                        horizon (< reach_elevation_deg) was heard this close in azimuth is an
+    #                                        echo, no found cue (measured, light rubble and half_buried seeds 0-15 of
+    #                                        two versions: 12 such pairs in one listen heard 0.99-1.6 m from the
+    #                                        nearest caller in 10, 0.4 m in 2; 3 false founds among them; a 4th false
+    #                                        found had its shallow partner one listen earlier from the same spot)
     supporting_elevation_deg: float = 10.0  # a bearing this far below horizontal points down at a mouth on the floor
     #                                        within ~1.1 m of the 0.3 m high array (bump criterion 4); one at its
     #                                        estimate heard shallower is farther away (refute_after_listens) ...
@@ -266,7 +267,8 @@ class RescueBehaviour:
         self._unheard_at: dict[int, int] = {}     # listens at a source's estimate that did not hear it
         self._level_at: dict[int, int] = {}       # listens at a source's estimate that heard it level (far away)
         self._restarted: set[int] = set()         # sources re-estimated from the listens at their old estimate
-        self._evidence: list[ListenEvidence] = []  # every bearing of the last listen
+        self._evidence: list[ListenEvidence] = []  # every bearing heard from the current spot (robot frame)
+        self._evidence_at: np.ndarray | None = None  # that spot (world x, y) and the yaw (rad) at it
         self._cue: dict[int, tuple[str, bool]] = {}   # the found cue a source showed in an earlier listen (and
         #                                                whether it was a steep bearing)
         self._target_contacts: dict[int, int] = {}
@@ -367,7 +369,10 @@ class RescueBehaviour:
         self.motion.update_odometry(stationary=True)
         pose = self.pose
         assoc = self.map.update(res.evidence, pose, self.clock.now())
-        self._evidence = list(res.evidence)
+        if self._evidence_at is None or math.hypot(*(pose[:2] - self._evidence_at[:2])) > DISTINCT_POSES_M \
+                or abs(wrap_angle(pose[2] - self._evidence_at[2])) > math.radians(5.0):
+            self._evidence, self._evidence_at = [], pose.copy()
+        self._evidence += res.evidence
         cands = []
         ignored = list(res.ignored)
         for ev, sid in assoc:
@@ -520,9 +525,9 @@ class RescueBehaviour:
         return np.array([x + r * math.cos(a), y + r * math.sin(a), self.map.config.source_height_m])
 
     def _floor_echo(self, ev: ListenEvidence) -> bool:
-        """A steep bearing heard in the same listen as a shallower one below the horizon within
-        ``echo_azimuth_deg`` of it: the floor's echo of a caller beyond reach (an image source below the floor
-        appears steeper than the caller), no found cue."""
+        """A steep bearing heard from the same spot as a shallower one below the horizon within
+        ``echo_azimuth_deg`` of it (in this listen or an earlier one from here): an echo of a caller beyond reach
+        (off the floor or debris, or an elevation side lobe), no found cue."""
         cfg = self.config
         return any(o is not ev and abs(wrap_angle(o.azimuth - ev.azimuth)) <= math.radians(cfg.echo_azimuth_deg)
                    and ev.elevation < o.elevation <= 0.0 and -math.degrees(o.elevation) < cfg.reach_elevation_deg

@@ -49,7 +49,7 @@ import numpy as np
 from robot.config_values import need
 from robot.odometry import Pose2D
 
-__all__ = ["BearingEvidence", "SoundMapConfig", "SourceClass", "SourceState", "Listen", "MapSource", "SoundMap",
+__all__ = ["BearingEvidence", "DISTINCT_POSES_M", "SoundMapConfig", "SourceClass", "SourceState", "Listen", "MapSource", "SoundMap",
            "triangulate"]
 
 
