@@ -125,11 +125,13 @@ class RescueConfig:
     #                                        the two heard at -11 and -13 deg were false founds 1.05 and 0.81 m
     #                                        from the caller behind the slab (half_buried_slab seeds 1, 3)
     echo_azimuth_deg: float = 30.0         # a steep bearing heard from the spot where a shallower one below the
-    #                                        horizon (< reach_elevation_deg) was heard this close in azimuth is an
-    #                                        echo, no found cue (measured, light rubble and half_buried seeds 0-15 of
-    #                                        two versions: 12 such pairs in one listen heard 0.99-1.6 m from the
-    #                                        nearest caller in 10, 0.4 m in 2; 3 false founds among them; a 4th false
-    #                                        found had its shallow partner one listen earlier from the same spot)
+    #                                        horizon (< reach_elevation_deg), at least as loud, was heard this close
+    #                                        in azimuth is an echo, no found cue. Measured, light rubble and half_buried
+    #                                        seeds 0-15, three versions: 16 such pairs in one listen; the 12 heard
+    #                                        0.99-1.6 m from the nearest caller (3 false founds among them) had the
+    #                                        steep one 0.6-4.9 dB weaker, the 3 heard 0.4 m from her 20-26 dB louder,
+    #                                        one 0.75 m away 4.4 dB weaker (a 4th false found had its partner one
+    #                                        listen earlier from the same spot)
     supporting_elevation_deg: float = 10.0  # a bearing this far below horizontal points down at a mouth on the floor
     #                                        within ~1.1 m of the 0.3 m high array (bump criterion 4); one at its
     #                                        estimate heard shallower is farther away (refute_after_listens) ...
@@ -525,13 +527,14 @@ class RescueBehaviour:
         return np.array([x + r * math.cos(a), y + r * math.sin(a), self.map.config.source_height_m])
 
     def _floor_echo(self, ev: ListenEvidence) -> bool:
-        """A steep bearing heard from the same spot as a shallower one below the horizon within
-        ``echo_azimuth_deg`` of it (in this listen or an earlier one from here): an echo of a caller beyond reach
-        (off the floor or debris, or an elevation side lobe), no found cue."""
+        """A steep bearing no louder than a shallower one below the horizon within ``echo_azimuth_deg`` of it,
+        heard from the same spot (in this listen or an earlier one from here): an echo of a caller beyond reach
+        (off the floor or debris, or an elevation side lobe), no found cue. A mouth right below is the loudest
+        sound in its direction."""
         cfg = self.config
         return any(o is not ev and abs(wrap_angle(o.azimuth - ev.azimuth)) <= math.radians(cfg.echo_azimuth_deg)
                    and ev.elevation < o.elevation <= 0.0 and -math.degrees(o.elevation) < cfg.reach_elevation_deg
-                   for o in self._evidence)
+                   and ev.level_db <= o.level_db for o in self._evidence)
 
     def _listen_again(self, s: MapSource, why: str) -> bool:
         """Count one more listen at ``s``; True (and a NO_TARGET event) while fewer than ``reject_after_listens``."""
