@@ -11,11 +11,16 @@ One cycle walks the data path, each stage in its own module:
   ``array_height_m`` up: at 30 deg a mouth on the floor is ~0.35 m away), or (2) steeper than
   ``corroborated_elevation_deg`` and its level rose ``level_rise_db`` above the faintest listen of it, or
   (3) the map puts it within ``found_distance_m`` of the robot with a horizontal 1-sigma under
-  ``found_sigma_m``, the bearing now points ``reach_elevation_deg`` down and the level rose (supporting cues), or (4) the bumper fires while driving at it with its estimate within
+  ``found_sigma_m``, the bearing now points ``reach_elevation_deg`` down and the level rose (supporting cues),
+  or (4) the bumper fires while driving at it with its estimate within
   ``bump_found_range_m`` and ``bump_ahead_deg`` of the motion, a voice was heard from it, it was heard within
   ``bump_heard_within_s`` and its last bearing pointed ``supporting_elevation_deg`` down (a victim under a
   slab cannot be reached).
-  The reported position is the map's estimate; a found source stays found in the map (never declared again);
+  A steep bearing no louder than a shallow one heard from the same spot in its direction is an echo, no cue.
+  The reported position is the map's estimate (for a steep bearing that joined a source mapped farther than
+  ``found_exclusion_m``, where that bearing meets the floor); a found source stays found (never declared again).
+  At an estimate where the source is heard level (``refute_after_listens``), the close listens refute the far
+  ones that placed it there: the source is re-estimated from them alone, once;
 * **plan** (``robot.planner``): the most useful unfound victim (P(victim), recency, path length; interferers
   never) and a path to it around the obstacles learned by touch (``robot.occupancy``); none mapped ->
   explore toward unvisited floor, away from found victims and interferers (after ``explore_after_silent``
@@ -24,7 +29,8 @@ One cycle walks the data path, each stage in its own module:
   most ``step_m`` along the path, then listen again. A contact (bumper, stall, gyro-detected slip) is
   mapped, the robot backs off and the next cycle replans around it. When the learned obstacles close every
   way, those marked by a single contact are forgotten (clearing recovery) and the robot replans. "stuck" only
-  when backing off and a short move in each of eight directions all fail.
+  when backing off and a short move in each of eight directions all fail (when all of them stalled without a
+  bumper press, again after turning in place: wedged on debris).
 
 Frames: evidence in the array frame (axes the robot's, azimuth CCW from forward); poses, map and grid in
 the odometry frame (``start_pose`` sets it, e.g. to the world start pose in simulation). The drive is
@@ -159,11 +165,12 @@ class RescueConfig:
     refute_after_listens: int = 2          # listens at a source's estimate that hear it shallower than
     #                                        supporting_elevation_deg (a mouth on the floor beyond ~1.1 m) before
     #                                        the estimate is dropped and the source re-estimated from these listens
-    #                                        alone (measured, light rubble seeds 0-15: 58 of 64 listens at an
-    #                                        estimate without a found cue heard it at -1..-9 deg where the estimate
-    #                                        lay at -3..-27 deg; 2 rays of two callers crossing beside the robot had
-    #                                        triangulated into a ghost, which was then rejected with the caller's
-    #                                        rays in it)
+    #                                        alone (measured on main, light rubble and half_buried seeds 0-15: of 75
+    #                                        listens at an estimate that heard its source without a found cue, 69
+    #                                        heard it shallower than 10 deg, 66 of them at estimates > 0.75 m from
+    #                                        every caller; in light rubble seed 0 two callers' rays crossing beside
+    #                                        the robot had triangulated into a ghost, rejected after 11 listens with
+    #                                        a caller's rays in it)
     max_victims: int | None = None         # stop after finding this many (None: keep searching)
     # moving
     step_m: float = 0.6                    # longest move between two listens

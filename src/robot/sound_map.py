@@ -49,8 +49,8 @@ import numpy as np
 from robot.config_values import need
 from robot.odometry import Pose2D
 
-__all__ = ["BearingEvidence", "DISTINCT_POSES_M", "SoundMapConfig", "SourceClass", "SourceState", "Listen", "MapSource", "SoundMap",
-           "triangulate"]
+__all__ = ["BearingEvidence", "DISTINCT_POSES_M", "SoundMapConfig", "SourceClass", "SourceState", "Listen",
+           "MapSource", "SoundMap", "triangulate"]
 
 
 class BearingEvidence(Protocol):
