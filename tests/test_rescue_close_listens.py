@@ -123,3 +123,16 @@ def test_wedged_on_debris_turns_in_place_and_moves_on_instead_of_stuck():
     assert ev[-1].decision is Decision.ALL_FOUND
     x, y, _ = w.pose()
     assert math.hypot(x - 3.0, y) <= 0.75           # truth: it drove on to the caller
+
+
+def test_a_bearing_heard_beside_a_single_ray_joins_it_only_where_they_cross_away_from_the_robot():
+    far, other = np.array([3.0, 0.0, 0.1]), np.array([1.2, -2.0, 0.1])
+    m = SoundMap()
+    (_, sid), = m.update([_Ev(far, (0.0, 0.0))], (0.0, 0.0, 0.0), 1.0)
+    # From a spot 0.1 m beside that ray, the other caller's bearing crosses it 0.1 m away: a separate source.
+    (_, sid2), = m.update([_Ev(other, (1.0, 0.1))], (1.0, 0.1, 0.0), 2.0)
+    assert sid2 != sid
+    # A bearing of the far caller from 1.4 m beside the first ray crosses it at her: the same source, there.
+    (_, sid3), = m.update([_Ev(far, (1.0, 1.4))], (1.0, 1.4, 0.0), 3.0)
+    assert sid3 == sid
+    assert np.hypot(*(m.source(sid).position[:2] - far[:2])) < 0.3

@@ -202,6 +202,8 @@ class _Source:
 # ----------------------------------------------------------------------------- geometry
 LEVEL_RAY_RANGE_M = 3.0   # range guessed for a bearing that does not point down to the height prior
 DISTINCT_POSES_M = 0.15   # two listens at least this far apart (horizontally) are from different poses
+NEAR_CROSSING_M = 0.5     # a source heard along one ray takes a new ray only where it crosses that ray this far
+#                           (horizontally) from the new ray's origin or farther (see ``SoundMap._along_ray``)
 
 
 def _baseline(rays: Sequence[Listen]) -> float:
@@ -545,6 +547,11 @@ class SoundMap:
         inflate = 1.0 + 1.0 / len(src.rays)   # the mean ray's own noise
         chi2 = (_wrap(az - az_m) ** 2 / math.radians(cfg.bearing_sigma_deg) ** 2
                 + (el - el_m) ** 2 / math.radians(cfg.elevation_sigma_deg) ** 2) / inflate
+        # Heard from a spot on (or beside) that ray, any bearing crosses it right there: no evidence. A mouth that
+        # close would be heard steeply, as a source of its own (measured, light rubble seed 2: a ray 90 deg off
+        # the first, heard 0.2 m beside it, triangulated with it into a ghost 0.2 m from the robot, then declared
+        # found by a -20 deg bearing 1.6 m from any caller).
+        chi2 = np.where(np.hypot(v[:, 0], v[:, 1]) >= NEAR_CROSSING_M, chi2, np.inf)
         return float(chi2.min())
 
     def _associate(self, ev: BearingEvidence, origin: np.ndarray, d: np.ndarray, taken: set[int]) -> int | None:
@@ -553,8 +560,8 @@ class SoundMap:
         for s in self._sources:
             if s.id in taken:
                 continue
-            m = self._mahalanobis(s, origin, d) if _crossing_deg(s.rays) >= cfg.min_pair_angle_deg \
-                else self._along_ray(s, origin, d)
+            m = self._mahalanobis(s, origin, d) if not s.rays or _crossing_deg(s.rays) >= cfg.min_pair_angle_deg \
+                else self._along_ray(s, origin, d)   # (no rays: placed by add_found, a point with its covariance)
             if m <= cfg.gate_chi2:
                 scores.append((m, s.id))
         if not scores:
