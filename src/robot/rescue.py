@@ -163,7 +163,8 @@ class RescueConfig:
     #                                        calls in ~40 % of 1 s listens in the shipped scenarios: 4 silent ones
     #                                        in a row happen to 13 % of callers, who stay on the map as unknown)
     refute_after_listens: int = 2          # listens at a source's estimate that hear it shallower than
-    #                                        supporting_elevation_deg (a mouth on the floor beyond ~1.1 m) before
+    #                                        supporting_elevation_deg (a mouth on the floor beyond ~1.1 m) or more
+    #                                        than the map's inlier_deg off the estimate (pointing past it) before
     #                                        the estimate is dropped and the source re-estimated from these listens
     #                                        alone (measured on main, light rubble and half_buried seeds 0-15: of 75
     #                                        listens at an estimate that heard its source without a found cue, 69
@@ -461,23 +462,25 @@ class RescueBehaviour:
                 # Only a listen that hears it without a cue counts (a caller who pauses says nothing); listens that
                 # do not hear it at all end the wait after twice as many (after as many: light rubble seeds 0-15,
                 # 180 s, 35 of 48 callers found instead of 40, same session).
-                if ev is not None and -math.degrees(ev.elevation) < cfg.supporting_elevation_deg \
-                        and sid not in self._restarted:
-                    # Heard level from its estimate: a mouth there would be heard steeply (>= 20 deg from 0.45 m),
-                    # this one is farther along this bearing. The close listens outweigh the far ones that placed
-                    # it here (two callers' bearings crossing, a reflection): re-estimate it from them alone, once.
+                if ev is not None and sid not in self._restarted \
+                        and (-math.degrees(ev.elevation) < cfg.supporting_elevation_deg
+                             or self._off_estimate_deg(ev, s) > self.map.config.inlier_deg):
+                    # Heard level from its estimate, or pointing past it: a mouth there would be heard steeply
+                    # (>= 20 deg from 0.45 m) and toward it; this one is farther along this bearing. The close
+                    # listens outweigh the far ones that placed it here (two callers' bearings crossing, a
+                    # reflection): re-estimate it from them alone, once.
                     n = self._level_at[sid] = self._level_at.get(sid, 0) + 1
                     if n < cfg.refute_after_listens:
-                        self._emit(Decision.NO_TARGET, f"at the estimate of source #{s.id} ({d:.2f} m), heard level "
-                                   f"({math.degrees(ev.elevation):+.0f} deg): listen again "
+                        self._emit(Decision.NO_TARGET, f"at the estimate of source #{s.id} ({d:.2f} m), heard level or"
+                                   f" past it ({math.degrees(ev.elevation):+.0f} deg): listen again "
                                    f"({n}/{cfg.refute_after_listens})", {"source": s.id})
                         return True
                     kept = self.map.restart_from(sid, xy)
                     self._restarted.add(sid)
                     for counts in (self._close_listens, self._unheard_at, self._level_at, self._baseline_steps):
                         counts.pop(sid, None)
-                    self._emit(Decision.NO_TARGET, f"at the estimate of source #{s.id} ({d:.2f} m), heard level "
-                               f"({math.degrees(ev.elevation):+.0f} deg) in {n} listens: it is farther along "
+                    self._emit(Decision.NO_TARGET, f"at the estimate of source #{s.id} ({d:.2f} m), heard level or "
+                               f"past it ({math.degrees(ev.elevation):+.0f} deg) in {n} listens: it is farther along "
                                f"that bearing; re-estimated from the {kept} listen(s) heard here", {"source": s.id})
                     continue
                 if ev is None:
@@ -524,6 +527,16 @@ class RescueBehaviour:
             self._declare_found(s, crit)
             return True
         return False
+
+    def _off_estimate_deg(self, ev: ListenEvidence, s: MapSource) -> float:
+        """Angle (deg) between a bearing heard now and the direction from the array to the source's estimate."""
+        x, y, yaw = self.pose
+        c, si = math.cos(yaw), math.sin(yaw)
+        u = np.asarray(ev.direction, float)
+        u = np.array([c * u[0] - si * u[1], si * u[0] + c * u[1], u[2]])
+        v = s.position - np.array([x, y, self.config.array_height_m])
+        cos = float(u @ v) / max(float(np.linalg.norm(u) * np.linalg.norm(v)), 1e-12)
+        return math.degrees(math.acos(max(-1.0, min(1.0, cos))))
 
     def _floor_point(self, ev: ListenEvidence) -> np.ndarray:
         """Where a bearing heard now (pointing down) meets the map's prior source height: world (x, y, z) m."""
