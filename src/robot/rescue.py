@@ -11,11 +11,16 @@ One cycle walks the data path, each stage in its own module:
   ``array_height_m`` up: at 30 deg a mouth on the floor is ~0.35 m away), or (2) steeper than
   ``corroborated_elevation_deg`` and its level rose ``level_rise_db`` above the faintest listen of it, or
   (3) the map puts it within ``found_distance_m`` of the robot with a horizontal 1-sigma under
-  ``found_sigma_m``, the bearing now points down and the level rose (supporting cues), or (4) the bumper fires while driving at it with its estimate within
+  ``found_sigma_m``, the bearing now points ``reach_elevation_deg`` down and the level rose (supporting cues),
+  or (4) the bumper fires while driving at it with its estimate within
   ``bump_found_range_m`` and ``bump_ahead_deg`` of the motion, a voice was heard from it, it was heard within
   ``bump_heard_within_s`` and its last bearing pointed ``supporting_elevation_deg`` down (a victim under a
   slab cannot be reached).
-  The reported position is the map's estimate; a found source stays found in the map (never declared again);
+  A steep bearing no louder than a shallow one heard from the same spot in its direction is an echo, no cue.
+  The reported position is the map's estimate (for a steep bearing that joined a source mapped farther than
+  ``found_exclusion_m``, where that bearing meets the floor); a found source stays found (never declared again).
+  At an estimate where the source is heard level (``refute_after_listens``), the close listens refute the far
+  ones that placed it there: the source is re-estimated from them alone, once;
 * **plan** (``robot.planner``): the most useful unfound victim (P(victim), recency, path length; interferers
   never) and a path to it around the obstacles learned by touch (``robot.occupancy``); none mapped ->
   explore toward unvisited floor, away from found victims and interferers (after ``explore_after_silent``
@@ -24,7 +29,8 @@ One cycle walks the data path, each stage in its own module:
   most ``step_m`` along the path, then listen again. A contact (bumper, stall, gyro-detected slip) is
   mapped, the robot backs off and the next cycle replans around it. When the learned obstacles close every
   way, those marked by a single contact are forgotten (clearing recovery) and the robot replans. "stuck" only
-  when backing off and a short move in each of eight directions all fail.
+  when backing off and a short move in each of eight directions all fail (when all of them stalled without a
+  bumper press, again after turning in place: wedged on debris).
 
 Frames: evidence in the array frame (axes the robot's, azimuth CCW from forward); poses, map and grid in
 the odometry frame (``start_pose`` sets it, e.g. to the world start pose in simulation). The drive is
@@ -49,7 +55,7 @@ from robot.occupancy import OccupancyConfig, OccupancyGrid
 from robot.odometry import Odometry, wrap_angle
 from robot.planner import Plan, Planner, PlannerConfig
 from robot.protocol import FAULT_NAMES
-from robot.sound_map import MapSource, SoundMap, SoundMapConfig, SourceClass, SourceState
+from robot.sound_map import DISTINCT_POSES_M, MapSource, SoundMap, SoundMapConfig, SourceClass, SourceState
 
 log = logging.getLogger(__name__)
 
@@ -117,8 +123,24 @@ class RescueConfig:
     found_distance_m: float = 0.45         # criterion 3: map estimate this close (success radius in the
     #                                        shipped scenarios is 0.75 m: margin for a 0.3 m estimate error)
     found_sigma_m: float = 0.3             # ... and its horizontal 1-sigma below this
-    supporting_elevation_deg: float = 10.0  # ... and heard now this far below horizontal (a mouth at 0.1 m within
-    #                                        1.1 m of a 0.3 m high array) ...
+    reach_elevation_deg: float = 15.0      # ... and heard now this far below horizontal: a mouth 0.2 m below the
+    #                                        array within 0.75 m (the success radius). Was 10 deg (within 1.1 m):
+    #                                        on the 7 finds by this criterion in 32 runs (main, seeds 0-15) the
+    #                                        range from the elevation matched the robot's true distance (0.70 vs
+    #                                        0.71 m, 1.03 vs 1.05 m, 0.87 vs 0.81 m, 0.45-0.58 vs 0.32-0.51 m);
+    #                                        the two heard at -11 and -13 deg were false founds 1.05 and 0.81 m
+    #                                        from the caller behind the slab (half_buried_slab seeds 1, 3)
+    echo_azimuth_deg: float = 30.0         # a steep bearing heard from the spot where a shallower one below the
+    #                                        horizon (< reach_elevation_deg), at least as loud, was heard this close
+    #                                        in azimuth is an echo, no found cue. Measured, light rubble and half_buried
+    #                                        seeds 0-15, three versions: 16 such pairs in one listen; the 12 heard
+    #                                        0.99-1.6 m from the nearest caller (3 false founds among them) had the
+    #                                        steep one 0.6-4.9 dB weaker, the 3 heard 0.4 m from her 20-26 dB louder,
+    #                                        one 0.75 m away 4.4 dB weaker (a 4th false found had its partner one
+    #                                        listen earlier from the same spot)
+    supporting_elevation_deg: float = 10.0  # a bearing this far below horizontal points down at a mouth on the floor
+    #                                        within ~1.1 m of the 0.3 m high array (bump criterion 4); one at its
+    #                                        estimate heard shallower is farther away (refute_after_listens) ...
     supporting_rise_db: float = 3.0        # ... and louder than its faintest listen (a mirror image beyond a wall
     #                                        triangulates tightly too: measured, 2 false finds in light rubble)
     bump_found_range_m: float = 0.8        # criterion 4: bump while driving at a target estimated this close
@@ -140,10 +162,23 @@ class RescueConfig:
     reject_after_listens: int = 4          # listens of an interferer from close up before it is rejected (a caller
     #                                        calls in ~40 % of 1 s listens in the shipped scenarios: 4 silent ones
     #                                        in a row happen to 13 % of callers, who stay on the map as unknown)
+    refute_after_listens: int = 2          # listens at a source's estimate that hear it shallower than
+    #                                        supporting_elevation_deg (a mouth on the floor beyond ~1.1 m) or more
+    #                                        than the map's inlier_deg off the estimate (pointing past it) before
+    #                                        the estimate is dropped and the source re-estimated from these listens
+    #                                        alone (measured on main, light rubble and half_buried seeds 0-15: of 75
+    #                                        listens at an estimate that heard its source without a found cue, 69
+    #                                        heard it shallower than 10 deg, 66 of them at estimates > 0.75 m from
+    #                                        every caller; in light rubble seed 0 two callers' rays crossing beside
+    #                                        the robot had triangulated into a ghost, rejected after 11 listens with
+    #                                        a caller's rays in it)
     max_victims: int | None = None         # stop after finding this many (None: keep searching)
     # moving
     step_m: float = 0.6                    # longest move between two listens
     min_step_m: float = 0.1
+    wedged_turn_deg: float = 45.0          # turn in place when every escape move stalled without a bumper press
+    #                                        (half the 120 deg wheel spacing: each wheel meets the debris anew;
+    #                                        measured, light rubble seed 0 ended "stuck" on a 15 mm debris plate)
     baseline_step_m: float = 0.4           # sideways step to triangulate a source known along one line only
     explore_after_silent: int = 3          # silent listens with nothing mapped before exploring
     fatal_faults: tuple[str, ...] = ("encoder_error",)  # drive faults that end the mission
@@ -159,6 +194,8 @@ class RescueConfig:
                 raise ValueError(f"RescueConfig.{name}: expected > 0, got {getattr(self, name)}")
         if not 0 < self.found_elevation_deg < 90 or not 0 < self.corroborated_elevation_deg < 90:
             raise ValueError("RescueConfig.found_elevation_deg / corroborated_elevation_deg: expected 0 < deg < 90")
+        if not self.reach_elevation_deg < 90:
+            raise ValueError(f"RescueConfig.reach_elevation_deg: expected 0 <= deg < 90, got {self.reach_elevation_deg}")
         if not 0 <= self.voice_threshold <= 1:
             raise ValueError(f"RescueConfig.voice_threshold: expected 0..1, got {self.voice_threshold}")
         if self.min_step_m > self.step_m:
@@ -166,7 +203,8 @@ class RescueConfig:
         if not (isinstance(self.fatal_faults, tuple) and set(self.fatal_faults) <= set(FAULT_NAMES.values())):
             raise ValueError(f"RescueConfig.fatal_faults: expected drive fault names out of "
                              f"{sorted(FAULT_NAMES.values())} (an empty list for none), got {self.fatal_faults!r}")
-        for name in ("explore_after_silent", "max_contacts_per_target", "max_baseline_steps", "reject_after_listens"):
+        for name in ("explore_after_silent", "max_contacts_per_target", "max_baseline_steps", "reject_after_listens",
+                     "refute_after_listens"):
             if getattr(self, name) < 1:
                 raise ValueError(f"RescueConfig.{name}: expected an integer >= 1, got {getattr(self, name)}")
         if self.max_victims is not None and self.max_victims < 1:
@@ -237,6 +275,10 @@ class RescueBehaviour:
         self._silent = 0
         self._close_listens: dict[int, int] = {}
         self._unheard_at: dict[int, int] = {}     # listens at a source's estimate that did not hear it
+        self._level_at: dict[int, int] = {}       # listens at a source's estimate that heard it level (far away)
+        self._restarted: set[int] = set()         # sources re-estimated from the listens at their old estimate
+        self._evidence: list[ListenEvidence] = []  # every bearing heard from the current spot (robot frame)
+        self._evidence_at: np.ndarray | None = None  # that spot (world x, y) and the yaw (rad) at it
         self._cue: dict[int, tuple[str, bool]] = {}   # the found cue a source showed in an earlier listen (and
         #                                                whether it was a steep bearing)
         self._target_contacts: dict[int, int] = {}
@@ -337,6 +379,10 @@ class RescueBehaviour:
         self.motion.update_odometry(stationary=True)
         pose = self.pose
         assoc = self.map.update(res.evidence, pose, self.clock.now())
+        if self._evidence_at is None or math.hypot(*(pose[:2] - self._evidence_at[:2])) > DISTINCT_POSES_M \
+                or abs(wrap_angle(pose[2] - self._evidence_at[2])) > math.radians(5.0):
+            self._evidence, self._evidence_at = [], pose.copy()
+        self._evidence += res.evidence
         cands = []
         ignored = list(res.ignored)
         for ev, sid in assoc:
@@ -378,7 +424,8 @@ class RescueBehaviour:
             # Beside a machine checked from close up only a voice makes a victim: its reflections off nearby
             # rubble arrive steep and loud (dense_pump: a -41 deg bearing 0.4 m from the pump).
             near_machine = s.cls is not SourceClass.VICTIM and self._near_machine(s)
-            if ev is not None and s.n_inliers >= 2 and not near_machine:
+            echo = ev is not None and self._floor_echo(ev)
+            if ev is not None and s.n_inliers >= 2 and not near_machine and not echo:
                 steep = -math.degrees(ev.elevation)
                 faintest = min((r.level_db for r in s.history), default=ev.level_db)
                 rise = ev.level_db - faintest
@@ -393,8 +440,8 @@ class RescueBehaviour:
             # The map alone is not enough (a wrong triangulation would declare empty floor): the bearing heard
             # now must point down as a mouth on the floor within reach does (elevation supporting).
             if crit is None and d <= cfg.found_distance_m and s.horizontal_sigma_m <= cfg.found_sigma_m \
-                    and s.n_inliers >= 3 and s.triangulated and not near_machine and ev is not None \
-                    and -math.degrees(ev.elevation) >= cfg.supporting_elevation_deg \
+                    and s.n_inliers >= 3 and s.triangulated and not near_machine and ev is not None and not echo \
+                    and -math.degrees(ev.elevation) >= cfg.reach_elevation_deg \
                     and ev.level_db - min(r.level_db for r in s.history) >= cfg.supporting_rise_db:
                 crit = (f"map estimate {d:.2f} m away (<= {cfg.found_distance_m:g}), +- "
                         f"{s.horizontal_sigma_m:.2f} m from {s.n_inliers} listens")
@@ -415,6 +462,27 @@ class RescueBehaviour:
                 # Only a listen that hears it without a cue counts (a caller who pauses says nothing); listens that
                 # do not hear it at all end the wait after twice as many (after as many: light rubble seeds 0-15,
                 # 180 s, 35 of 48 callers found instead of 40, same session).
+                if ev is not None and sid not in self._restarted \
+                        and (-math.degrees(ev.elevation) < cfg.supporting_elevation_deg
+                             or self._off_estimate_deg(ev, s) > self.map.config.inlier_deg):
+                    # Heard level from its estimate, or pointing past it: a mouth there would be heard steeply
+                    # (>= 20 deg from 0.45 m) and toward it; this one is farther along this bearing. The close
+                    # listens outweigh the far ones that placed it here (two callers' bearings crossing, a
+                    # reflection): re-estimate it from them alone, once.
+                    n = self._level_at[sid] = self._level_at.get(sid, 0) + 1
+                    if n < cfg.refute_after_listens:
+                        self._emit(Decision.NO_TARGET, f"at the estimate of source #{s.id} ({d:.2f} m), heard level or"
+                                   f" past it ({math.degrees(ev.elevation):+.0f} deg): listen again "
+                                   f"({n}/{cfg.refute_after_listens})", {"source": s.id})
+                        return True
+                    kept = self.map.restart_from(sid, xy)
+                    self._restarted.add(sid)
+                    for counts in (self._close_listens, self._unheard_at, self._level_at, self._baseline_steps):
+                        counts.pop(sid, None)
+                    self._emit(Decision.NO_TARGET, f"at the estimate of source #{s.id} ({d:.2f} m), heard level or "
+                               f"past it ({math.degrees(ev.elevation):+.0f} deg) in {n} listens: it is farther along "
+                               f"that bearing; re-estimated from the {kept} listen(s) heard here", {"source": s.id})
+                    continue
                 if ev is None:
                     n = self._unheard_at[sid] = self._unheard_at.get(sid, 0) + 1
                     if n < 2 * cfg.reject_after_listens:
@@ -448,9 +516,45 @@ class RescueBehaviour:
                 self._reject(s, f"reached ({crit}) but no voice heard (P(victim) {s.victim_probability:.2f}): "
                                 "an interferer, not a victim")
                 continue
+            if steep_cue and d > cfg.found_exclusion_m:
+                # A mouth heard right below, but the source this bearing joined is mapped far off: the bearing is
+                # another caller's (measured, light rubble seed 9: a caller heard at -36 deg joined the source of
+                # one 2.4 m away, was reported there, and that caller was then excluded as found). The steep
+                # bearing itself says where she is: where it meets the floor.
+                self._cue.pop(sid, None)
+                s = self.map.source(self.map.add_found(self._floor_point(ev), self.clock.now()))
+                crit += f"; where this bearing meets the floor (the source it joined is mapped {d:.2f} m away)"
             self._declare_found(s, crit)
             return True
         return False
+
+    def _off_estimate_deg(self, ev: ListenEvidence, s: MapSource) -> float:
+        """Angle (deg) between a bearing heard now and the direction from the array to the source's estimate."""
+        x, y, yaw = self.pose
+        c, si = math.cos(yaw), math.sin(yaw)
+        u = np.asarray(ev.direction, float)
+        u = np.array([c * u[0] - si * u[1], si * u[0] + c * u[1], u[2]])
+        v = s.position - np.array([x, y, self.config.array_height_m])
+        cos = float(u @ v) / max(float(np.linalg.norm(u) * np.linalg.norm(v)), 1e-12)
+        return math.degrees(math.acos(max(-1.0, min(1.0, cos))))
+
+    def _floor_point(self, ev: ListenEvidence) -> np.ndarray:
+        """Where a bearing heard now (pointing down) meets the map's prior source height: world (x, y, z) m."""
+        x, y, yaw = self.pose
+        h = self.config.array_height_m - self.map.config.source_height_m
+        r = h / max(math.tan(-ev.elevation), 1e-3)
+        a = yaw + ev.azimuth
+        return np.array([x + r * math.cos(a), y + r * math.sin(a), self.map.config.source_height_m])
+
+    def _floor_echo(self, ev: ListenEvidence) -> bool:
+        """A steep bearing no louder than a shallower one below the horizon within ``echo_azimuth_deg`` of it,
+        heard from the same spot (in this listen or an earlier one from here): an echo of a caller beyond reach
+        (off the floor or debris, or an elevation side lobe), no found cue. A mouth right below is the loudest
+        sound in its direction."""
+        cfg = self.config
+        return any(o is not ev and abs(wrap_angle(o.azimuth - ev.azimuth)) <= math.radians(cfg.echo_azimuth_deg)
+                   and ev.elevation < o.elevation <= 0.0 and -math.degrees(o.elevation) < cfg.reach_elevation_deg
+                   and ev.level_db <= o.level_db for o in self._evidence)
 
     def _listen_again(self, s: MapSource, why: str) -> bool:
         """Count one more listen at ``s``; True (and a NO_TARGET event) while fewer than ``reject_after_listens``."""
@@ -651,21 +755,35 @@ class RescueBehaviour:
 
     def _escape(self, why: str) -> None:
         """Try a short move in eight directions (the four axes, then the diagonals: wedged between debris pieces
-        the robot may pass between them); "stuck" only when every one is blocked."""
-        yaw = float(self.pose[2])
-        for k in (0, 2, 4, 6, 1, 3, 5, 7):
-            heading = k * math.pi / 4
+        the robot may pass between them). When every one stalled and none pressed the bumper, the robot is not
+        walled in but wedged, a wheel against a piece of debris: turn in place (the wheels meet the debris at
+        other angles) and try the eight again. "stuck" only when that fails too."""
+        kinds = set()
+        for attempt in range(2):
+            yaw = float(self.pose[2])
+            for k in (0, 2, 4, 6, 1, 3, 5, 7):
+                heading = k * math.pi / 4
+                try:
+                    self.motion.translate(heading, self.motion.config.backoff_m, self.motion.config.recover_speed,
+                                          arm_bumper_on_release=True)
+                    self._emit(Decision.RECOVER, f"{why}; freed by moving {math.degrees(heading):.0f} deg "
+                                                 f"(robot frame){' after turning in place' if attempt else ''}",
+                               {"kind": "escape"})
+                    return
+                except Blocked as b:
+                    if b.kind == "fault":
+                        return
+                    kinds.add(b.kind)
+                    self.grid.mark_contact(self.pose, yaw + heading, b.kind)
+            if attempt or "bumper" in kinds:
+                break
             try:
-                self.motion.translate(heading, self.motion.config.backoff_m, self.motion.config.recover_speed,
-                                      arm_bumper_on_release=True)
-                self._emit(Decision.RECOVER, f"{why}; freed by moving {math.degrees(heading):.0f} deg "
-                                             "(robot frame)", {"kind": "escape"})
-                return
+                self.motion.turn(math.radians(self.config.wedged_turn_deg))
             except Blocked as b:
                 if b.kind == "fault":
                     return
-                self.grid.mark_contact(self.pose, yaw + heading, b.kind)
-        self._finish(Decision.STUCK, f"{why}; a move in each of eight directions was blocked")
+        self._finish(Decision.STUCK, f"{why}; a move in each of eight directions was blocked"
+                                     f"{'' if 'bumper' in kinds else ', also after turning in place'}")
 
     # -- helpers ----------------------------------------------------------------------
     def _bearing_to(self, position) -> tuple[float, float]:
