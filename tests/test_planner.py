@@ -59,7 +59,7 @@ def test_target_prefers_victims_interferers_last_never_found_or_rejected():
     pump = _src(0, (0.8, 0.0), 0.05, SourceClass.INTERFERER)
     far_victim = _src(1, (3.0, 0.0), 0.9, SourceClass.VICTIM)
     found = _src(2, (1.0, 1.0), 0.95, SourceClass.VICTIM, SourceState.FOUND)
-    unknown = _src(3, (0.5, -0.5), 0.5, SourceClass.UNKNOWN)
+    unknown = _src(3, (-0.5, -1.0), 0.5, SourceClass.UNKNOWN)   # 1.6 m from the pump: not its image
     pl = Planner()
     s, plan, why = pl.choose_target([pump, far_victim, found, unknown], g, (0.0, 0.0, 0.0), 12.0)
     assert s.id == 1 and plan is not None          # the far victim, not the near pump or unknown source

@@ -511,9 +511,10 @@ class RescueBehaviour:
             self._emit(Decision.NO_TARGET, f"{why}; listen again")
             return
         self._silent = 0
-        avoid = [s.position[:2] for s in self.map.sources
-                 if s.state is SourceState.FOUND or s.cls is SourceClass.INTERFERER]
-        plan, how = self.planner.explore_goal(self.grid, self.pose, avoid)
+        avoid = [s.position[:2] for s in self.map.sources if s.state is SourceState.FOUND]
+        machines = [s.position[:2] for s in self.map.sources
+                    if s.cls is SourceClass.INTERFERER and s.state is not SourceState.FOUND]
+        plan, how = self.planner.explore_goal(self.grid, self.pose, avoid, machines)
         if plan is None:
             self._emit(Decision.NO_TARGET, f"{why}; {how}")
             n = self.grid.forget()
@@ -653,6 +654,7 @@ class RescueBehaviour:
         """Try a short move in eight directions (the four axes, then the diagonals: wedged between debris pieces
         the robot may pass between them); "stuck" only when every one is blocked."""
         yaw = float(self.pose[2])
+        kinds = []
         for k in (0, 2, 4, 6, 1, 3, 5, 7):
             heading = k * math.pi / 4
             try:
@@ -664,8 +666,9 @@ class RescueBehaviour:
             except Blocked as b:
                 if b.kind == "fault":
                     return
+                kinds.append(f"{math.degrees(heading):.0f} deg: {b.kind}")
                 self.grid.mark_contact(self.pose, yaw + heading, b.kind)
-        self._finish(Decision.STUCK, f"{why}; a move in each of eight directions was blocked")
+        self._finish(Decision.STUCK, f"{why}; a move in each of eight directions was blocked ({', '.join(kinds)})")
 
     # -- helpers ----------------------------------------------------------------------
     def _bearing_to(self, position) -> tuple[float, float]:
