@@ -146,6 +146,7 @@ class RescueConfig:
     min_step_m: float = 0.1
     baseline_step_m: float = 0.4           # sideways step to triangulate a source known along one line only
     explore_after_silent: int = 3          # silent listens with nothing mapped before exploring
+    escape_rounds: int = 2                 # rounds of eight escape moves before "stuck" (see _escape)
     fatal_faults: tuple[str, ...] = ("encoder_error",)  # drive faults that end the mission
 
     def __post_init__(self) -> None:
@@ -166,7 +167,8 @@ class RescueConfig:
         if not (isinstance(self.fatal_faults, tuple) and set(self.fatal_faults) <= set(FAULT_NAMES.values())):
             raise ValueError(f"RescueConfig.fatal_faults: expected drive fault names out of "
                              f"{sorted(FAULT_NAMES.values())} (an empty list for none), got {self.fatal_faults!r}")
-        for name in ("explore_after_silent", "max_contacts_per_target", "max_baseline_steps", "reject_after_listens"):
+        for name in ("explore_after_silent", "max_contacts_per_target", "max_baseline_steps", "reject_after_listens",
+                     "escape_rounds"):
             if getattr(self, name) < 1:
                 raise ValueError(f"RescueConfig.{name}: expected an integer >= 1, got {getattr(self, name)}")
         if self.max_victims is not None and self.max_victims < 1:
@@ -652,23 +654,30 @@ class RescueBehaviour:
 
     def _escape(self, why: str) -> None:
         """Try a short move in eight directions (the four axes, then the diagonals: wedged between debris pieces
-        the robot may pass between them); "stuck" only when every one is blocked."""
+        the robot may pass between them), standing ``settle_s`` before each, in ``escape_rounds`` rounds; "stuck"
+        only when every one is blocked. A failed push leaves the robot pressed against what it met, and the next
+        direction stalls on that friction: measured, dense_pump seed 1 declared stuck at 47 s against a wall with
+        the floor free along it (from its final state a move along the wall succeeds)."""
         yaw = float(self.pose[2])
-        kinds = []
-        for k in (0, 2, 4, 6, 1, 3, 5, 7):
-            heading = k * math.pi / 4
-            try:
-                self.motion.translate(heading, self.motion.config.backoff_m, self.motion.config.recover_speed,
-                                      arm_bumper_on_release=True)
-                self._emit(Decision.RECOVER, f"{why}; freed by moving {math.degrees(heading):.0f} deg "
-                                             "(robot frame)", {"kind": "escape"})
-                return
-            except Blocked as b:
-                if b.kind == "fault":
+        kinds: list[str] = []
+        for _ in range(self.config.escape_rounds):
+            kinds = []
+            for k in (0, 2, 4, 6, 1, 3, 5, 7):
+                heading = k * math.pi / 4
+                self.motion.stand(self.config.settle_s)
+                try:
+                    self.motion.translate(heading, self.motion.config.backoff_m, self.motion.config.recover_speed,
+                                          arm_bumper_on_release=True)
+                    self._emit(Decision.RECOVER, f"{why}; freed by moving {math.degrees(heading):.0f} deg "
+                                                 "(robot frame)", {"kind": "escape"})
                     return
-                kinds.append(f"{math.degrees(heading):.0f} deg: {b.kind}")
-                self.grid.mark_contact(self.pose, yaw + heading, b.kind)
-        self._finish(Decision.STUCK, f"{why}; a move in each of eight directions was blocked ({', '.join(kinds)})")
+                except Blocked as b:
+                    if b.kind == "fault":
+                        return
+                    kinds.append(f"{math.degrees(heading):.0f} deg: {b.kind}")
+                    self.grid.mark_contact(self.pose, yaw + heading, b.kind)
+        self._finish(Decision.STUCK, f"{why}; a move in each of eight directions was blocked, "
+                                     f"{self.config.escape_rounds} times ({', '.join(kinds)})")
 
     # -- helpers ----------------------------------------------------------------------
     def _bearing_to(self, position) -> tuple[float, float]:
