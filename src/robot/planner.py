@@ -10,14 +10,17 @@ Frames: world/odometry frame (x, y in m). Inputs are the ``SoundMap``'s sources 
   Utility = P(victim) x exp(-age / ``recency_s``) / (1 + path length / ``distance_scale_m``)
   / (1 + 1-sigma / ``sigma_scale_m``) (a single bearing's guess counts less than a triangulated source), the current
   target's utility times ``keep_factor`` (no dithering between two callers: measured, the reactive behaviour
-  made 21 turns between two intermittent callers on light_rubble_three seed 6).
+  made 21 turns between two intermittent callers on light_rubble_three seed 6). A source never heard with speech
+  beside a mapped interferer, or heard along its line, is taken for that machine's image and not approached
+  (``machine_image``); nor is an interferer checked that images one checked already.
 * **path** (``plan``): Dijkstra (``scipy.sparse.csgraph``) on the grid's free cells (unknown counts as
   free: only touch tells obstacles), 16-connected, to the nearest cell within ``stop_radius`` of the goal;
   then shortened to line-of-sight waypoints.
 * **exploration** (``explore_goal``): ``explore_headings`` points ``explore_distance_m`` away; the one with
   most unvisited floor around it, reachable, preferring directions away from found victims (their calls
-  mask fainter ones) and mapped interferers; or, when that is better once path lengths are counted against both,
-  the best unvisited reachable cell anywhere on the grid (frontier: the way out of a covered pocket of rubble).
+  mask fainter ones) and, more so, from mapped interferers; or, when that is better once path lengths are counted
+  against both, the best unvisited reachable cell near covered floor (frontier: the way out of a covered pocket of
+  rubble).
 """
 from __future__ import annotations
 
