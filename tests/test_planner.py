@@ -1,4 +1,5 @@
 """Occupancy grid learned by touch and the planner on it, checked against the geometry put in."""
+import dataclasses
 import math
 
 import numpy as np
@@ -59,7 +60,7 @@ def test_target_prefers_victims_interferers_last_never_found_or_rejected():
     pump = _src(0, (0.8, 0.0), 0.05, SourceClass.INTERFERER)
     far_victim = _src(1, (3.0, 0.0), 0.9, SourceClass.VICTIM)
     found = _src(2, (1.0, 1.0), 0.95, SourceClass.VICTIM, SourceState.FOUND)
-    unknown = _src(3, (0.5, -0.5), 0.5, SourceClass.UNKNOWN)
+    unknown = _src(3, (-0.5, -1.0), 0.5, SourceClass.UNKNOWN)   # 1.6 m from the pump: not its image
     pl = Planner()
     s, plan, why = pl.choose_target([pump, far_victim, found, unknown], g, (0.0, 0.0, 0.0), 12.0)
     assert s.id == 1 and plan is not None          # the far victim, not the near pump or unknown source
@@ -147,3 +148,39 @@ def test_config_errors_name_the_field():
         OccupancyConfig(resolution_m=0)
     with pytest.raises(ValueError, match="stall_log_odds"):
         OccupancyConfig(stall_log_odds=3.0)
+
+
+def test_explore_leads_away_from_a_machine_and_frontier_goals_stay_near_covered_floor():
+    """Covered floor along y = 0 from x = -2 to x = 2, the robot at the origin, a machine at (-2.5, 0): the goal
+    lies on the side away from it, and a frontier goal is unvisited floor next to the covered strip."""
+    g = OccupancyGrid(OccupancyConfig(size_m=12.0))
+    g.mark_path((-2.0, 0.0), (2.0, 0.0))
+    cfg = PlannerConfig()
+    plan, why = Planner(cfg).explore_goal(g, (0.0, 0.0, 0.0), machines=[np.array([-2.5, 0.0])])
+    assert plan is not None, why
+    goal = plan.waypoints[-1]
+    assert goal[0] > 0.5, why                                      # away from the machine
+    plan, why = Planner(cfg)._frontier_goal(g, (0.0, 0.0), [], [np.array([-2.5, 0.0])],
+                                            Planner(cfg).distances(g, (0.0, 0.0)))
+    assert plan is not None, why
+    visited = np.argwhere(g.visited > 0)
+    gap = np.min(np.hypot(*(g.centre(visited) - plan[0].waypoints[-1]).T))
+    assert gap <= cfg.frontier_reach_m + g.resolution, why         # not deep in the unknown (a wall may be there)
+    assert plan[0].waypoints[-1][0] > 0.5, why
+
+
+def test_machine_image_needs_no_voice_and_the_machine_near_or_on_its_bearings():
+    from robot.sound_map import Listen
+    pump = _src(0, (3.0, 0.0), 0.05, SourceClass.INTERFERER)
+    ray = Listen(1.0, (0.0, 0.0, 0.3), (1.0, 0.0, 0.0), None, 0.42, -40.0, 1.0)   # heard toward the pump
+    voiced = Listen(2.0, (0.0, 0.0, 0.3), (1.0, 0.0, 0.0), None, 0.9, -40.0, 1.0)
+    off = Listen(1.0, (0.0, 0.0, 0.3), (0.0, 1.0, 0.0), None, 0.42, -40.0, 1.0)    # 90 deg off the pump
+    beyond = MapSource(1, np.array([6.0, 0.0, 0.1]), np.eye(3), 0.4, SourceClass.UNKNOWN, SourceState.UNVISITED,
+                       1, 1, 0.0, 1.0, -40.0, -40.0, (ray,))
+    pl = Planner()
+    assert pl.machine_image(beyond, [pump])                       # 3 m beyond the pump, on its bearing
+    assert not pl.machine_image(dataclasses.replace(beyond, history=(ray, voiced)), [pump])   # a voice was heard
+    aside = dataclasses.replace(beyond, position=np.array([0.0, 2.0, 0.1]), history=(off,))
+    assert not pl.machine_image(aside, [pump])                    # 3.6 m from it, heard 90 deg off its bearing
+    near = dataclasses.replace(aside, position=np.array([3.0, 1.2, 0.1]))
+    assert pl.machine_image(near, [pump])                         # 1.2 m from it

@@ -10,14 +10,17 @@ Frames: world/odometry frame (x, y in m). Inputs are the ``SoundMap``'s sources 
   Utility = P(victim) x exp(-age / ``recency_s``) / (1 + path length / ``distance_scale_m``)
   / (1 + 1-sigma / ``sigma_scale_m``) (a single bearing's guess counts less than a triangulated source), the current
   target's utility times ``keep_factor`` (no dithering between two callers: measured, the reactive behaviour
-  made 21 turns between two intermittent callers on light_rubble_three seed 6).
+  made 21 turns between two intermittent callers on light_rubble_three seed 6). A source never heard with speech
+  beside a mapped interferer, or heard along its line, is taken for that machine's image and not approached
+  (``machine_image``); nor is an interferer checked that images one checked already.
 * **path** (``plan``): Dijkstra (``scipy.sparse.csgraph``) on the grid's free cells (unknown counts as
   free: only touch tells obstacles), 16-connected, to the nearest cell within ``stop_radius`` of the goal;
   then shortened to line-of-sight waypoints.
 * **exploration** (``explore_goal``): ``explore_headings`` points ``explore_distance_m`` away; the one with
   most unvisited floor around it, reachable, preferring directions away from found victims (their calls
-  mask fainter ones) and mapped interferers; or, when that is better once path lengths are counted against both,
-  the best unvisited reachable cell anywhere on the grid (frontier: the way out of a covered pocket of rubble).
+  mask fainter ones) and, more so, from mapped interferers; or, when that is better once path lengths are counted
+  against both, the best unvisited reachable cell near covered floor (frontier: the way out of a covered pocket of
+  rubble).
 """
 from __future__ import annotations
 
@@ -76,6 +79,23 @@ class PlannerConfig:
     unreachable_retry_s: float = 60.0  # a target without a path (or that bumps too often) is skipped this long
     explore_distance_m: float = 1.2
     explore_headings: int = 16
+    # An unclassified source never heard with speech this close to a mapped interferer is taken for its image
+    # (reflections off the rubble around a machine) and not approached: dense_pump seed 0 chased five
+    # voiceless sources 0.9-1.5 m from the pump for 150 s, rejecting each from close up.
+    machine_image_radius_m: float = 1.5
+    image_bearing_deg: float = 12.0    # ... or most of its bearings pointed this close to the machine (the sound
+    #                                    map's inlier_deg: a bearing this close supports the machine's position)
+    # Exploring, a goal farther from a mapped interferer than the robot is scores up to this many times the
+    # away bonus of a found victim (``explore_goal``; each explore_distance_m farther counts once): beside a
+    # machine its sound masks the callers. Measured in dense_pump, 1 s standing listens on a 0.5 m grid of the
+    # reachable floor (6 per point): the mid-room caller, within 1.5 m of her, was detected (15 deg) in 27 of 54
+    # of her sounding listens with the pump over 2.5 m away but 2 of 16 with it closer; from farther than 1.5 m in
+    # 12 of 210. The way out of a machine's neighbourhood is worth a longer path.
+    machine_away_max: float = 3.0
+    # A frontier goal is unvisited floor at most this far from floor the robot has covered (Yamauchi's frontier:
+    # known floor meets unknown). Touch maps walls only where met, so a cell deep in the unknown may lie beyond one:
+    # dense_pump seed 2 (with the away-from-machine bonus) drove for 80 s at frontier goals 1.5 m outside the room.
+    frontier_reach_m: float = 0.6
 
     def __post_init__(self) -> None:
         need(self, self.recency_s > 0, "recency_s", "> 0 s")
@@ -90,6 +110,10 @@ class PlannerConfig:
         need(self, self.unreachable_retry_s >= 0, "unreachable_retry_s", ">= 0 s")
         need(self, self.explore_distance_m > 0, "explore_distance_m", "> 0 m")
         need(self, self.explore_headings >= 4, "explore_headings", "an integer >= 4")
+        need(self, self.machine_image_radius_m >= 0, "machine_image_radius_m", ">= 0 m")
+        need(self, self.machine_away_max >= 1, "machine_away_max", ">= 1")
+        need(self, self.frontier_reach_m > 0, "frontier_reach_m", "> 0 m")
+        need(self, 0 <= self.image_bearing_deg < 90, "image_bearing_deg", "in [0, 90) degrees")
 
 
 @dataclass(frozen=True)
@@ -201,8 +225,12 @@ class Planner:
                  and (s.cls is SourceClass.VICTIM or time - s.last_time <= cfg.stale_s)
                  and time - self._unreachable.get(s.id, -math.inf) >= cfg.unreachable_retry_s]
         victims = [s for s in open_ if s.cls is SourceClass.VICTIM]
-        unknown = [s for s in open_ if s.cls is SourceClass.UNKNOWN]
-        interferers = [s for s in open_ if s.cls is SourceClass.INTERFERER and s.n_inliers >= cfg.min_listens]
+        machines = [s for s in sources if s.cls is SourceClass.INTERFERER and s.n_inliers >= cfg.min_listens]
+        unknown = [s for s in open_ if s.cls is SourceClass.UNKNOWN and not self.machine_image(s, machines)]
+        # An interferer is checked from close up only if it is not the image of one checked already (rejected).
+        checked = [s for s in machines if s.state is SourceState.REJECTED]
+        interferers = [s for s in open_ if s.cls is SourceClass.INTERFERER and s.n_inliers >= cfg.min_listens
+                       and not self.machine_image(s, checked)]
         # Interferers only when nothing else is mapped: reached, they are rejected (a victim whose voice the
         # VAD missed from afar is heard from close up).
         pool = victims or unknown or interferers
@@ -233,9 +261,32 @@ class Planner:
             why += f"; {n_int} interferer(s) mapped, not approached"
         return s, plan, why
 
-    def explore_goal(self, grid: OccupancyGrid, pose, avoid: Sequence[np.ndarray] = ()
-                     ) -> tuple[Plan | None, str]:
-        """A reachable point ``explore_distance_m`` away with the most unvisited floor around it."""
+    def machine_image(self, s: MapSource, machines: Sequence[MapSource]) -> bool:
+        """``s`` was never heard with speech and lies within ``machine_image_radius_m`` of one of ``machines``
+        (interferers), or most of its bearings pointed within ``image_bearing_deg`` of one (heard along the
+        machine's line: its estimate's range is then the along-ray guess, often beyond the machine or a wall):
+        most likely that machine's reflection, not worth a trip."""
+        if any(r.voice_probability >= 0.5 for r in s.history):
+            return False
+        cos_max = math.cos(math.radians(self.config.image_bearing_deg))
+        for m in machines:
+            if m.id == s.id:
+                continue
+            if m.distance_to(s.position) <= self.config.machine_image_radius_m:
+                return True
+            if s.history:
+                o = np.array([r.origin[:2] for r in s.history])
+                d = np.array([r.direction[:2] for r in s.history])
+                v = m.position[:2] - o
+                cos = np.sum(v * d, axis=1) / np.maximum(np.hypot(*v.T) * np.hypot(*d.T), 1e-9)
+                if np.mean(cos >= cos_max) > 0.5:
+                    return True
+        return False
+
+    def explore_goal(self, grid: OccupancyGrid, pose, avoid: Sequence[np.ndarray] = (),
+                     machines: Sequence[np.ndarray] = ()) -> tuple[Plan | None, str]:
+        """A reachable point ``explore_distance_m`` away with the most unvisited floor around it, away from the
+        points ``avoid`` (found victims) and, more so, from ``machines`` (mapped interferers, world x, y)."""
         cfg = self.config
         x, y = float(pose[0]), float(pose[1])
         search = self.distances(grid, (x, y))
@@ -252,15 +303,13 @@ class Planner:
             box = (slice(max(0, ij[0] - r), ij[0] + r + 1), slice(max(0, ij[1] - r), ij[1] + r + 1))
             # Unvisited floor draws; known obstacles there (walls met before) push away.
             score = float(unvisited[box].mean()) - 3.0 * float(occupied[box].mean())
-            for p in avoid:   # away from found victims and interferers: their sound masks fainter sources
-                d = math.hypot(goal[0] - p[0], goal[1] - p[1]) - math.hypot(x - p[0], y - p[1])
-                score += 0.5 * float(np.clip(d / cfg.explore_distance_m, -1, 1))
+            score += float(self._away(goal[None], (x, y), avoid, machines)[0])
             plan = self.plan(grid, (x, y), goal, stop_radius=0.2, _search=search)
             if plan is None or plan.length > 2.0 * cfg.explore_distance_m:
                 continue
             if best is None or score > best[0]:
                 best = (score, plan, math.degrees(a))
-        far, far_why = self._frontier_goal(grid, (x, y), avoid, search)
+        far, far_why = self._frontier_goal(grid, (x, y), avoid, machines, search)
         # The ring's best against the best unvisited cell anywhere, each worth its score over (1 + path length /
         # distance_scale_m) as a target is: in a pocket of rubble whose floor is covered the ring offers only
         # visited floor (measured, dense_pump: the robot circled its start for 100-250 s), the way out leads on.
@@ -271,11 +320,23 @@ class Planner:
             return None, far_why
         return far[0], far_why
 
+    def _away(self, goals: np.ndarray, xy, avoid: Sequence[np.ndarray], machines: Sequence[np.ndarray]) -> np.ndarray:
+        """Bonus of ``goals`` (..., 2) for leading away from found victims and machines: their sound masks fainter
+        sources. 0.5 per ``explore_distance_m`` farther than the robot is, within -1..1 of that for a found
+        victim, -1..``machine_away_max`` for a machine."""
+        cfg = self.config
+        out = np.zeros(goals.shape[:-1])
+        for pts, top in ((avoid, 1.0), (machines, cfg.machine_away_max)):
+            for p in pts:
+                d = np.hypot(goals[..., 0] - p[0], goals[..., 1] - p[1]) - math.hypot(xy[0] - p[0], xy[1] - p[1])
+                out += 0.5 * np.clip(d / cfg.explore_distance_m, -1, top)
+        return out
+
     def _worth(self, score, length):
         return np.maximum(score, 0.0) / (1.0 + length / self.config.distance_scale_m)
 
-    def _frontier_goal(self, grid: OccupancyGrid, xy, avoid: Sequence[np.ndarray], search
-                       ) -> tuple[tuple[Plan, float] | None, str]:
+    def _frontier_goal(self, grid: OccupancyGrid, xy, avoid: Sequence[np.ndarray], machines: Sequence[np.ndarray],
+                       search) -> tuple[tuple[Plan, float] | None, str]:
         """The best unvisited reachable cell anywhere (frontier exploration, Yamauchi 1997) at least
         ``explore_distance_m`` along the path, scored as the ring's goals, worth that score (if positive) over
         (1 + path length / ``distance_scale_m``): ``((plan, worth), why)`` or ``(None, why)``."""
@@ -290,10 +351,9 @@ class Planner:
         score = ndimage.uniform_filter(unvisited.astype(float), size, mode="constant") \
             - 3.0 * ndimage.uniform_filter(grid.occupied.astype(float), size, mode="constant")
         centres = grid.origin + (np.indices(idx.shape).transpose(1, 2, 0) + 0.5) * grid.resolution
-        for p in avoid:
-            d = np.hypot(centres[..., 0] - p[0], centres[..., 1] - p[1]) - math.hypot(xy[0] - p[0], xy[1] - p[1])
-            score += 0.5 * np.clip(d / cfg.explore_distance_m, -1, 1)
-        ok = reach & unvisited & (length >= cfg.explore_distance_m)
+        score += self._away(centres, xy, avoid, machines)
+        near_covered = ndimage.distance_transform_edt(grid.visited == 0) * grid.resolution <= cfg.frontier_reach_m
+        ok = reach & unvisited & near_covered & (length >= cfg.explore_distance_m)
         utility = np.where(ok, self._worth(score, np.where(ok, length, 0.0)), -np.inf)
         ij = np.unravel_index(int(np.argmax(utility)), utility.shape)
         # The frontier goal chosen before, while still unvisited, reachable and not reached, counts keep_factor

@@ -181,6 +181,7 @@ class RescueConfig:
     #                                        measured, light rubble seed 0 ended "stuck" on a 15 mm debris plate)
     baseline_step_m: float = 0.4           # sideways step to triangulate a source known along one line only
     explore_after_silent: int = 3          # silent listens with nothing mapped before exploring
+    escape_rounds: int = 2                 # rounds of eight escape moves before "stuck" (see _escape)
     fatal_faults: tuple[str, ...] = ("encoder_error",)  # drive faults that end the mission
 
     def __post_init__(self) -> None:
@@ -204,7 +205,7 @@ class RescueConfig:
             raise ValueError(f"RescueConfig.fatal_faults: expected drive fault names out of "
                              f"{sorted(FAULT_NAMES.values())} (an empty list for none), got {self.fatal_faults!r}")
         for name in ("explore_after_silent", "max_contacts_per_target", "max_baseline_steps", "reject_after_listens",
-                     "refute_after_listens"):
+                     "refute_after_listens", "escape_rounds"):
             if getattr(self, name) < 1:
                 raise ValueError(f"RescueConfig.{name}: expected an integer >= 1, got {getattr(self, name)}")
         if self.max_victims is not None and self.max_victims < 1:
@@ -615,9 +616,10 @@ class RescueBehaviour:
             self._emit(Decision.NO_TARGET, f"{why}; listen again")
             return
         self._silent = 0
-        avoid = [s.position[:2] for s in self.map.sources
-                 if s.state is SourceState.FOUND or s.cls is SourceClass.INTERFERER]
-        plan, how = self.planner.explore_goal(self.grid, self.pose, avoid)
+        avoid = [s.position[:2] for s in self.map.sources if s.state is SourceState.FOUND]
+        machines = [s.position[:2] for s in self.map.sources
+                    if s.cls is SourceClass.INTERFERER and s.state is not SourceState.FOUND]
+        plan, how = self.planner.explore_goal(self.grid, self.pose, avoid, machines)
         if plan is None:
             self._emit(Decision.NO_TARGET, f"{why}; {how}")
             n = self.grid.forget()
@@ -755,35 +757,41 @@ class RescueBehaviour:
 
     def _escape(self, why: str) -> None:
         """Try a short move in eight directions (the four axes, then the diagonals: wedged between debris pieces
-        the robot may pass between them). When every one stalled and none pressed the bumper, the robot is not
-        walled in but wedged, a wheel against a piece of debris: turn in place (the wheels meet the debris at
-        other angles) and try the eight again. "stuck" only when that fails too."""
-        kinds = set()
-        for attempt in range(2):
+        the robot may pass between them), standing ``settle_s`` before each, in ``escape_rounds`` rounds; "stuck"
+        only when every one is blocked. A failed push leaves the robot pressed against what it met, and the next
+        direction stalls on that friction: measured, dense_pump seed 1 declared stuck at 47 s against a wall with
+        the floor free along it (from its final state a move along the wall succeeds). When a whole round stalled
+        and none pressed the bumper, the robot is not walled in but wedged, a wheel against a piece of debris: it
+        turns in place (the wheels meet the debris at other angles) before the next round."""
+        kinds: list[str] = []
+        turned = False
+        for attempt in range(self.config.escape_rounds):
+            if attempt and not any(k.endswith("bumper") for k in kinds):
+                turned = True
+                try:
+                    self.motion.turn(math.radians(self.config.wedged_turn_deg))
+                except Blocked as b:
+                    if b.kind == "fault":
+                        return
             yaw = float(self.pose[2])
+            kinds = []
             for k in (0, 2, 4, 6, 1, 3, 5, 7):
                 heading = k * math.pi / 4
+                self.motion.stand(self.config.settle_s)
                 try:
                     self.motion.translate(heading, self.motion.config.backoff_m, self.motion.config.recover_speed,
                                           arm_bumper_on_release=True)
                     self._emit(Decision.RECOVER, f"{why}; freed by moving {math.degrees(heading):.0f} deg "
-                                                 f"(robot frame){' after turning in place' if attempt else ''}",
+                                                 f"(robot frame){' after turning in place' if turned else ''}",
                                {"kind": "escape"})
                     return
                 except Blocked as b:
                     if b.kind == "fault":
                         return
-                    kinds.add(b.kind)
+                    kinds.append(f"{math.degrees(heading):.0f} deg: {b.kind}")
                     self.grid.mark_contact(self.pose, yaw + heading, b.kind)
-            if attempt or "bumper" in kinds:
-                break
-            try:
-                self.motion.turn(math.radians(self.config.wedged_turn_deg))
-            except Blocked as b:
-                if b.kind == "fault":
-                    return
-        self._finish(Decision.STUCK, f"{why}; a move in each of eight directions was blocked"
-                                     f"{'' if 'bumper' in kinds else ', also after turning in place'}")
+        self._finish(Decision.STUCK, f"{why}; a move in each of eight directions was blocked, "
+                                     f"{self.config.escape_rounds} times (last round: {', '.join(kinds)})")
 
     # -- helpers ----------------------------------------------------------------------
     def _bearing_to(self, position) -> tuple[float, float]:
