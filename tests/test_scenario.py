@@ -85,9 +85,10 @@ def test_path_length_matches_the_physics_trajectory():
 
 
 def test_three_callers_in_light_rubble_found_over_four_seeds():
-    """Seeds 0-3 of the shipped scenario (240 s): at least 8 of the 12 callers found, none declared falsely. Over
-    seeds, not one run: a run is chaotic (one different listen changes the path), and single seeds swing from 0
-    (seed 0 ends wedged on debris by the far corner) to 3 (README, rescue benchmark: 40 of 48 on seeds 0-15)."""
+    """Seeds 0-3 of the shipped scenario (240 s): at least 11 of the 12 callers found (the issue's 23 of 24, with
+    one miss of margin), none declared falsely. Over seeds, not one run: a run is chaotic (one different listen
+    changes the path). Measured: 12 of 12 (README, rescue benchmark, session 4: 47 of 48 on seeds 0-15 in 180 s;
+    8 of 12 was the bound while seed 0 ended wedged on debris)."""
     found, false = 0, 0
     for seed in range(4):
         r = run_scenario("light_rubble_three", seed=seed)
@@ -100,7 +101,7 @@ def test_three_callers_in_light_rubble_found_over_four_seeds():
         assert r["angular_error_deg"]["all_detections"]["median"] < 10.0
         costs = r["wall_clock_s"]
         assert costs["physics"] > 0 and costs["acoustics"] > 0 and costs["localization"] > 0
-    assert found >= 8 and false == 0, (found, false)
+    assert found >= 11 and false == 0, (found, false)
 
 
 def test_grid_geodesic_goes_around_a_wall():
