@@ -55,11 +55,14 @@ class EchoLocalizer(FakeLocalizer):
 def _first_find_distance(config):
     caller = Source((2.2, 0.6, 0.1), 64.0)
     w = World([caller], seed=4)
-    b = make(w, config, localizer=EchoLocalizer(w))
-    for _ in range(60):
-        ev = b.step()
-        f = found_events(ev)
-        if f:
+    return _distance_at_first_find(make(w, config, localizer=EchoLocalizer(w)), w, caller, 60)
+
+
+def _distance_at_first_find(b, w, caller, steps):
+    """Step ``b`` up to ``steps`` cycles; the robot's true distance (m) to ``caller`` at the first declaration, or
+    None if none was made."""
+    for _ in range(steps):
+        if found_events(b.step()):
             x, y, _ = w.pose()
             return math.hypot(x - caller.position[0], y - caller.position[1])
         if b.done:
@@ -147,13 +150,7 @@ def _at_a_ghost_short_of_the_caller(config):
     ghost = np.array([1.35, 0.0, 0.15])
     for origin in ((0.3, -0.9), (0.4, 0.9), (0.0, 0.1)):
         b.map.update([_Ev(ghost, origin)], (*origin, 0.0), 0.0)
-    for _ in range(25):
-        if found_events(b.step()):
-            x, y, _ = w.pose()
-            return math.hypot(x - caller.position[0], y - caller.position[1])
-        if b.done:
-            break
-    return None
+    return _distance_at_first_find(b, w, caller, 25)
 
 
 def test_a_map_estimate_find_needs_a_bearing_within_reach():
