@@ -123,19 +123,22 @@ class FakeLocalizer:
         return Result(sorted(dets, key=lambda d: -d.level_db))
 
 
-def speech_of_truth(samples, det, direction):
-    """The VAD stand-in: speech in 60 % of a caller's listens (it pauses), never toward a machine."""
-    speech_of_truth.n += 1
-    return 0.5 if det.voice and speech_of_truth.n % 5 not in (1, 3) else 0.0
+class SpeechOfTruth:
+    """The VAD stand-in: speech in 60 % of a caller's listens (it pauses), never toward a machine. One per
+    behaviour: a counter shared between tests made each test's outcome depend on the tests run before it."""
 
+    def __init__(self):
+        self.n = 0
 
-speech_of_truth.n = 0
+    def __call__(self, samples, det, direction):
+        self.n += 1
+        return 0.5 if det.voice and self.n % 5 not in (1, 3) else 0.0
 
 
 def make(world, config=RescueConfig(), **kw):
     audio = kw.pop("audio", None) or FakeAudio(world.clock)
     loc = kw.pop("localizer", None) or FakeLocalizer(world)
-    kw.setdefault("speech", speech_of_truth)
+    kw.setdefault("speech", SpeechOfTruth())
     start = world.drive.truth.pose
     return RescueBehaviour(audio, world.drive, world.clock, loc, config, start_pose=start, **kw)
 
