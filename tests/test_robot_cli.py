@@ -74,6 +74,26 @@ def test_missing_audio_backend_is_a_clear_error(monkeypatch, capsys):
     assert code == 2
 
 
+def test_set_reaches_the_behaviours_other_configs(recording, monkeypatch):
+    """``--set SECTION.FIELD=VALUE``: the odometry's loaded-wheel threshold (to be measured on the robot's
+    open-loop drive) and a planner field reach the behaviour that runs the mission."""
+    import robot.cli as cli
+    made = []
+
+    class Recorded(cli.RescueBehaviour):
+        def __init__(self, *a, **kw):
+            super().__init__(*a, **kw)
+            made.append(self)
+
+    monkeypatch.setattr(cli, "RescueBehaviour", Recorded)
+    code, _ = run(["--dry-run", "--replay", str(recording), "--max-time", "2", "--set", "travel.loaded_speed=5.0",
+                   "--set", "planner.frontier_reach_m=0.8", "--set", "listen_s=0.5"])
+    assert code == 0 and len(made) == 1
+    b = made[0]
+    assert b.odometry.travel.loaded_speed == 5.0 and b.planner.config.frontier_reach_m == 0.8
+    assert b.config.listen_s == 0.5
+
+
 def test_bad_arguments_are_named(recording, tmp_path, capsys):
     assert run(["--replay", str(recording)])[0] == 2
     assert "--serial PORT" in capsys.readouterr().err
@@ -85,6 +105,10 @@ def test_bad_arguments_are_named(recording, tmp_path, capsys):
     assert "bogus" in capsys.readouterr().err
     assert run(["--dry-run", "--replay", str(recording), "--set", "listen_s=fast"])[0] == 2
     assert "listen_s" in capsys.readouterr().err
+    assert run(["--dry-run", "--replay", str(recording), "--set", "wheels.loaded_speed=5"])[0] == 2
+    assert "unknown section 'wheels'" in capsys.readouterr().err
+    assert run(["--dry-run", "--replay", str(recording), "--set", "travel.loaded_speed=-1"])[0] == 2
+    assert "loaded_speed" in capsys.readouterr().err
     four = tmp_path / "four.wav"
     wavfile.write(four, FS, np.zeros((100, 4), np.int16))
     assert run(["--dry-run", "--replay", str(four)])[0] == 2

@@ -19,7 +19,12 @@ import sys
 from robot.config_values import field_values
 from robot.hal import Clock, ManualClock, WallClock
 from robot.interrupt import check_interrupt, deferred_sigint
+from robot.motion import MotionConfig
+from robot.occupancy import OccupancyConfig
+from robot.odometry import GyroFusionConfig, TravelConfig
+from robot.planner import PlannerConfig
 from robot.rescue import RescueBehaviour, RescueConfig, RescueEvent
+from robot.sound_map import SoundMapConfig
 
 PROG = "ssl-robot"
 
@@ -49,22 +54,37 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--max-victims", type=int, default=None, help="stop after this many victims")
     p.add_argument("--realtime", action="store_true", help="with --replay: pace the replay in real time")
     p.add_argument("--set", action="append", default=[], metavar="FIELD=VALUE",
-                   help="override a RescueConfig field, e.g. --set listen_s=2.0 (repeatable)")
+                   help="override a RescueConfig field, e.g. --set listen_s=2.0, or a field of one of the "
+                        "behaviour's other configs, e.g. --set travel.loaded_speed=5.0 (sections: "
+                        + ", ".join(sorted(_SECTIONS)) + ") (repeatable)")
     p.add_argument("--json", action="store_true", help="print events as JSON lines")
     p.add_argument("-v", "--verbose", action="store_true", help="debug logging on stderr")
     return p
 
 
-def _rescue_config(args) -> RescueConfig:
-    values = {}
+# ``--set SECTION.FIELD=VALUE`` reaches these configs of the behaviour (a plain FIELD: ``RescueConfig``); e.g. the
+# odometry's loaded-wheel threshold must be measured on the robot's open-loop drive (``TravelConfig``).
+_SECTIONS = {"motion": MotionConfig, "sound_map": SoundMapConfig, "planner": PlannerConfig,
+             "occupancy": OccupancyConfig, "gyro": GyroFusionConfig, "travel": TravelConfig}
+
+
+def _rescue_config(args) -> tuple[RescueConfig, dict]:
+    """``--set`` values -> (``RescueConfig``, keyword configs of ``RescueBehaviour`` by section)."""
+    values: dict[str, dict[str, str]] = {}
     for item in args.set:
         name, sep, text = item.partition("=")
         if not sep:
-            raise ValueError(f"--set {item!r}: expected FIELD=VALUE, e.g. --set listen_s=2.0")
-        values[name.strip()] = text
+            raise ValueError(f"--set {item!r}: expected FIELD=VALUE or SECTION.FIELD=VALUE, e.g. --set listen_s=2.0")
+        section, dot, field = name.strip().rpartition(".")
+        if dot and section not in _SECTIONS:
+            raise ValueError(f"--set {item!r}: unknown section {section!r}; expected one of {sorted(_SECTIONS)}")
+        values.setdefault(section, {})[field] = text
     try:
-        changes = field_values(RescueConfig, values, "--set", text=True, sep=" ")
-        return RescueConfig(**{"max_victims": args.max_victims, **changes})
+        changes = field_values(RescueConfig, values.pop("", {}), "--set", text=True, sep=" ")
+        config = RescueConfig(**{"max_victims": args.max_victims, **changes})
+        sections = {sec: _SECTIONS[sec](**field_values(_SECTIONS[sec], vals, f"--set {sec}", text=True))
+                    for sec, vals in values.items()}
+        return config, sections
     except (ValueError, TypeError) as exc:
         msg = str(exc)
         raise ValueError(msg if msg.startswith("--set") else f"--set: {msg}") from None
@@ -217,7 +237,7 @@ def main(argv: list[str] | None = None, out=None) -> int:
 
     try:
         _check_options(args)
-        config = _rescue_config(args)
+        config, sections = _rescue_config(args)
     except ValueError as exc:
         return fail(str(exc))
     drive = audio = None
@@ -238,7 +258,7 @@ def main(argv: list[str] | None = None, out=None) -> int:
     src = args.replay or f"audio devices {args.audio}"
     drv = "dry run (no motors)" if args.dry_run else f"drive on {args.serial}"
     print(f"{PROG}: rescue on {src}, {drv}, array {geometry.name}, up to {args.max_time:g} s", file=out, flush=True)
-    behaviour = RescueBehaviour(audio, drive, clock, localizer, config)
+    behaviour = RescueBehaviour(audio, drive, clock, localizer, config, **sections)
     code = 0
     try:
         with deferred_sigint():

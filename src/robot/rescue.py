@@ -53,7 +53,7 @@ from robot.kinematics import OmniDriveParams
 from robot.listening import ListenEvidence, Listener
 from robot.motion import Blocked, Motion, MotionConfig
 from robot.occupancy import OccupancyConfig, OccupancyGrid
-from robot.odometry import Odometry, wrap_angle
+from robot.odometry import GyroFusionConfig, Odometry, TravelConfig, wrap_angle
 from robot.planner import Plan, Planner, PlannerConfig
 from robot.protocol import FAULT_NAMES
 from robot.sound_map import DISTINCT_POSES_M, MapSource, SoundMap, SoundMapConfig, SourceClass, SourceState
@@ -264,6 +264,7 @@ class RescueBehaviour:
                  config: RescueConfig = RescueConfig(), *, motion: MotionConfig = MotionConfig(),
                  sound_map: SoundMapConfig = SoundMapConfig(), planner: PlannerConfig = PlannerConfig(),
                  occupancy: OccupancyConfig = OccupancyConfig(), params: OmniDriveParams = OmniDriveParams(),
+                 gyro: GyroFusionConfig = GyroFusionConfig(), travel: TravelConfig = TravelConfig(),
                  start_pose=(0.0, 0.0, 0.0), geometry=None, speech=None) -> None:
         self.audio, self.drive, self.clock, self.localizer, self.config = audio, drive, clock, localizer, config
         geometry = geometry if geometry is not None else getattr(localizer, "geometry", None)
@@ -274,7 +275,7 @@ class RescueBehaviour:
         loc_fs = getattr(getattr(localizer, "config", None), "fs", None)
         if loc_fs is not None and int(loc_fs) != audio.sample_rate:
             raise ValueError(f"localizer fs is {loc_fs} Hz but the audio source delivers {audio.sample_rate} Hz")
-        self.odometry = Odometry(params, start_pose)
+        self.odometry = Odometry(params, start_pose, gyro, travel)
         self.motion = Motion(drive, clock, self.odometry, motion, fatal=self._check_faults)
         self.listener = Listener(audio, clock, localizer, mics, config.voice_threshold, speech)
         self.map = SoundMap(dataclasses.replace(sound_map, array_height_m=config.array_height_m))
