@@ -269,7 +269,7 @@ def _chain_scores(sir_db):
     return rows
 
 
-# Measured (README, "Telling a victim from a machine"), per room in the order of ROOM_CASES. Without the
+# Measured (docs/hearing.md), per room in the order of ROOM_CASES. Without the
 # interference rescan the talker got no track in most rooms: the SRP-PHAT map of the mixture had a peak
 # within 10 deg of her in 2-56 of 124 windows at -6 dB SIR even with four peaks and no gate; pooled, her
 # track VOICE 33 %, machine NON_VOICE 81 %. With the rescan (bins weighted by their departure from the
@@ -288,7 +288,7 @@ def _chain_scores(sir_db):
 # telephony) in 57 % beside the ore mine; fr_june beside industry_light keeps the machine VOICE early.
 # Strict xfail: when the chain meets the issue, it fails.
 @pytest.mark.slow
-@pytest.mark.xfail(strict=True, reason="talker not localized beside a machine 6 dB louder (README figures)")
+@pytest.mark.xfail(strict=True, reason="talker not localized beside a machine 6 dB louder (docs/hearing.md figures)")
 def test_real_chain_talker_is_voice_and_louder_machine_is_not_in_a_reverberant_room():
     rows = _chain_scores(-6.0)
     report = [(c[:2], round(float(np.mean(v)), 2), round(float(np.mean(m)), 2)) for c, (v, m, _) in zip(ROOM_CASES, rows)]
@@ -301,7 +301,7 @@ def test_real_chain_talker_is_voice_and_louder_machine_is_not_in_a_reverberant_r
 
 # Measured: a VOICE track within 10 deg of her in 86/86/100/100/79 % of her windows per room, pooled 90 %
 # with the voice scan (77 % before it: 79/64/93/93/57; 43 % without the interference rescan, 63 % with it
-# before the onset weight, 73 % before the hearing's crediting rules; README). Seeded simulation,
+# before the onset weight, 73 % before the hearing's crediting rules; docs/hearing.md). Seeded simulation,
 # deterministic: 63 of her 70 windows (54 before the scan), the threshold is 49.
 @pytest.mark.slow
 def test_real_chain_voice_track_within_10_deg_at_0_db_sir():

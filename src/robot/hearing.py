@@ -15,7 +15,7 @@ every block). Per stage (4.8 ms in a run): Silero 1.6 (its encoder 0.9, the LSTM
 building its inputs 0.2: ``robot.vad``'s split net), MPDR 0.9, STFT 0.45, synthesis 0.3, noise floor and
 gains 0.25, the rest (power, levels, gain, filter, evidence) 1.2. Listening less (1 s in 2, 0.5 in 1.5,
 0.4 in 1) or refreshing the MPDR less often lost windows in the room cases of tests/test_hearing.py
-(README, "Cost").
+(docs/hearing.md, "Cost").
 
 Why this front end (``benchmarks/bench_voice.py``, five rooms of RT60 0.6 s with a talker and a real
 machine recording 6 dB louder, both 2 m away): Silero hears her in 26 % of her talking seconds at one
@@ -29,7 +29,7 @@ the horizon are heard with the tracks' (same STFT, MPDR, suppression, one VAD ba
 beam carries the most speech (mean VAD probability x denoised beam power, averaged over ``scan_memory_s``
 of listening) is a ``Detection`` for the tracker (``voice_detections``) whenever a scan beam hears speech.
 A talker beside a machine 6 dB louder is rarely a peak of the SRP-PHAT map, but her voice is heard in
-the MPDR beams that cancel the machine, most strongly in hers (README, "The voice scan": in the test rooms
+the MPDR beams that cancel the machine, most strongly in hers (docs/hearing.md, "The voice scan": in the test rooms
 her track then exists in 86 % of her talking seconds instead of 66 %). Cost: +0.39 ms CPU per second of
 audio per scan beam (24 beams at 15 deg: +9.4 ms).
 
@@ -76,7 +76,7 @@ from ssl_core.grid import direction_from_angles
 from ssl_core.noise import NoiseFloor
 from ssl_core.tracking import Track
 
-VAD_RATE = 8000  # Hz: the beams are formed below 4 kHz and heard by Silero at 8 kHz (README, "Cost")
+VAD_RATE = 8000  # Hz: the beams are formed below 4 kHz and heard by Silero at 8 kHz (docs/hearing.md, "Cost")
 
 
 @dataclass(frozen=True)
@@ -103,26 +103,26 @@ class HearingConfig:
     noise_min_gain: float = 0.3    # noise suppression's lowest bin gain (-10 dB; 0.1 measured worse: musical
                                    # noise made Silero hear speech in a machine's beam)
     vad_on_s: float = 0.5          # the chain listens vad_on_s in every vad_period_s (all tracks at once):
-    vad_period_s: float = 1.0      # half the cost. Room cases (README, "Cost"): 0.5 s in 1 s as good as
+    vad_period_s: float = 1.0      # half the cost. Room cases (docs/hearing.md, "Cost"): 0.5 s in 1 s as good as
                                    # continuous; 1 s in 2 s, 0.4 in 1, 0.5 in 1.5 or 0.5 in 2 fall short
     credit_probability: float = 0.75  # only speech frames at this VAD probability or more raise P(voice): a
                                       # talker leaking into a machine's beam is marginal speech (dev rooms,
-                                      # README "Telling a victim from a machine": 37-48 % of the speech
+                                      # docs/hearing.md, "Crediting speech to its own beam": 37-48 % of the speech
                                       # frames in machines' beams reach 0.75, 87-89 % of hers; 0.7 / 0.8
                                       # / 0.85 / 0.9 measured there)
     settle_s: float = 1.0          # listening time (s) after the start before speech raises any P(voice): the
                                    # MPDR covariance and noise floors are still filling, and the dev rooms'
                                    # machines' beams owned her speech then (0.5 / 1 / 1.5 / 2 s measured:
-                                   # README, "Telling a victim from a machine")
+                                   # docs/hearing.md, "Crediting speech to its own beam")
     inherit_deg: float = 20.0   # a new track id within this of a known track starts from its log-odds, not
                                 # the prior: the tracker starts duplicates of one machine at other elevations
                                 # (0: off)
     beam_update_s: float = 0.5     # MPDR inverse covariance (and weights) refreshed every 0.5 s of listening
-                                   # (1 s lost windows in the room cases; README, "Cost")
+                                   # (1 s lost windows in the room cases; docs/hearing.md, "Cost")
     # Voice scan (0: off): beams every scan_step_deg of azimuth on the horizon, each heard by the VAD like a
     # track's; the direction whose beam carries the most speech (VAD probability x denoised beam power,
     # averaged over scan_memory_s of listening) becomes a detection for the tracker (``voice_detections``).
-    # It finds a talker the SRP-PHAT map misses beside a louder machine (README, "The voice scan"). 15 deg:
+    # It finds a talker the SRP-PHAT map misses beside a louder machine (docs/hearing.md, "The voice scan"). 15 deg:
     # the dev rooms' figures equal 10 deg's (and the test rooms'), at 2/3 of the cost; 20 deg lost machine
     # windows. Off by default: +9.4 ms CPU per second of audio (benchmarks/bench_voice.py).
     scan_step_deg: float = 0.0
