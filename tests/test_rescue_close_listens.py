@@ -165,7 +165,7 @@ def test_a_map_estimate_find_needs_a_bearing_within_reach():
 
 def test_a_map_estimate_with_a_steep_bearing_declares_the_caller_on_entering_reach():
     # A caller 3.2 m away. The map criterion at 0.45 m / 1-sigma 0.3 m made the robot drive on until a steep bearing
-    # (20-30 deg down: 0.3-0.5 m from her) declared her; at 0.7 m / 0.4 m the map estimate and a bearing 15 deg down
+    # (20-30 deg down: 0.3-0.5 m from her) declared her; at 0.6 m / 0.4 m the map estimate and a bearing 15 deg down
     # declare her as soon as both put her within reach. Truth: every declaration within the 0.75 m success radius,
     # none closer than before, some 0.2 m farther out (0.2 m less to drive in each such leg).
     caller = Source((3.0, -1.0, 0.12), 64.0)

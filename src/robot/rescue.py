@@ -125,13 +125,16 @@ class RescueConfig:
     found_sigma_m: float = 0.3             # ... with its horizontal 1-sigma below this, the robot stops approaching and
     #                                        waits for a found cue (or rejects a reflection). 0.6 m instead (criterion
     #                                        3 too): light rubble seeds 0-15 at 180 s, 46 vs 47 of 48, SPL 0.536 vs 0.557
-    cue_distance_m: float = 0.7            # criterion 3 (with the supporting cues below): the map estimate this close
+    cue_distance_m: float = 0.6            # criterion 3 (with the supporting cues below): the map estimate this close
     cue_sigma_m: float = 0.4               # ... and its 1-sigma this small. Measured on main, light rubble seeds 0-15:
     #                                        the listens inside the 0.75 m success radius before the find that heard
     #                                        the caller >= 15 deg down had her estimate 0.3-0.7 m away at 1-sigma
     #                                        0.06-0.39 m while the robot was 0.36-0.66 m from her; at 0.45 m / 0.3 m it
     #                                        drove on (median find 0.31 m from her; 33 m of the 47 legs' 180 m were
-    #                                        driven inside the success radius)
+    #                                        driven inside the success radius). Seeds 0-15 against main: light rubble
+    #                                        (180 s) SPL 0.573 vs 0.557, 47 vs 47 of 48; generator_louder SPL 0.559 vs
+    #                                        0.512; half_buried_slab 20 vs 20 of 32; false founds equal. 0.7 m: light
+    #                                        rubble SPL 0.570, half_buried_slab 19 of 32 (a late find lost)
     reach_elevation_deg: float = 15.0      # ... and heard now this far below horizontal: a mouth 0.2 m below the
     #                                        array within 0.75 m (the success radius). Was 10 deg (within 1.1 m):
     #                                        on the 7 finds by this criterion in 32 runs (main, seeds 0-15) the
