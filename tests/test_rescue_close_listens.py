@@ -195,3 +195,20 @@ def test_a_map_estimate_find_needs_a_bearing_within_reach():
     # later bearings (which point elsewhere), so she is mapped anew and found within reach.
     new = _at_a_ghost_short_of_the_caller(RescueConfig(max_victims=1))
     assert new is not None and new <= 0.75
+
+
+def test_a_map_estimate_with_a_steep_bearing_declares_the_caller_on_entering_reach():
+    # A caller 3.2 m away. The map criterion at 0.45 m / 1-sigma 0.3 m made the robot drive on until a steep bearing
+    # (20-30 deg down: 0.3-0.5 m from her) declared her; at 0.6 m / 0.4 m the map estimate and a bearing 15 deg down
+    # declare her as soon as both put her within reach. Truth: every declaration within the 0.75 m success radius,
+    # none closer than before, some 0.2 m farther out (0.2 m less to drive in each such leg).
+    caller = Source((3.0, -1.0, 0.12), 64.0)
+    old, new = [], []
+    for seed in range(8):
+        for out, cfg in ((old, RescueConfig(max_victims=1, cue_distance_m=0.45, cue_sigma_m=0.3)),
+                         (new, RescueConfig(max_victims=1))):
+            w = World([caller], seed=seed)
+            out.append(_distance_at_first_find(make(w, cfg), w, caller, 60))
+    assert all(d is not None and d <= 0.75 for d in old + new)
+    assert all(n >= o - 1e-6 for o, n in zip(old, new))
+    assert sum(n - o >= 0.15 for o, n in zip(old, new)) >= 2
