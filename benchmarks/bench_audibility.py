@@ -87,17 +87,17 @@ def main() -> None:
             scan_hits = {}
             if settles:   # the scan of a fresh Hearing on the whole block, 0.1 s at a time, as a listen would feed it
                 h = Hearing(mics, fs, hcfg, vad=vad)
-                x = block.samples
+                xs = block.samples
                 found = []   # (time s, azimuth rad)
-                for k0 in range(0, x.shape[-1], fs // 10):
-                    h.update(x[:, k0:k0 + fs // 10], [], (k0 + fs // 10) / fs)
+                for k0 in range(0, xs.shape[-1], fs // 10):
+                    h.update(xs[:, k0:k0 + fs // 10], [], (k0 + fs // 10) / fs)
                     found += [((k0 + fs // 10) / fs, d.azimuth) for d in h.voice_detections()]
                 near = np.array([[abs(math.remainder(f - t, 2 * math.pi)) <= math.radians(a.tolerance)
                                   for t in az[: run.n_victims]] for _, f in found]).reshape(-1, run.n_victims)
                 # the same time spent in today's 1 s listens: SRP-PHAT on each whole second of the block
                 hit_srp = np.zeros(run.n_victims, bool)
-                for k0 in range(0, x.shape[-1] - fs + 1, fs):
-                    ud = np.array([d.direction for d in run.localizer.locate(x[:, k0:k0 + fs]).detections]).reshape(-1, 3)
+                for k0 in range(0, xs.shape[-1] - fs + 1, fs):
+                    ud = np.array([d.direction for d in run.localizer.locate(xs[:, k0:k0 + fs]).detections]).reshape(-1, 3)
                     if len(ud):
                         hit_srp |= (ud @ truth[: run.n_victims].T >= cos_tol).any(axis=0)
                 scan_hits["srp"] = hit_srp
