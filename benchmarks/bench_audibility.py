@@ -12,7 +12,16 @@ Measured (dense_pump, step 0.5 m, 6 listens, 75 points, 15 deg): the mid-room ca
 27/54 of her sounding listens with the pump over 2.5 m away, 2/16 with it closer, 12/210 from farther than 1.5 m;
 the caller in the void under the slab in 7/35 within 1.5 m and 9/234 beyond.
 
-Run: ``.venv/bin/python benchmarks/bench_audibility.py dense_pump [--step 0.5] [--listens 6]``
+With ``--scan-s 3`` every listen lasts 3 s: the 1 s figures are its first second, beside SRP-PHAT on each of its
+three seconds (today's 1 s listens over the same time) and the voice scan (``robot.hearing``, beams every 15 deg,
+a fresh chain per listen, listening all the time) scored after each ``--settle``. Measured (dense_pump, step
+0.5 m, 3 listens of 3 s, 225 listens, 254 s CPU), detected / sounding listens, SRP-PHAT 1 s x 3 -> scan settled
+after 1 s: the mid-room caller within 1.5 m, pump over 2.5 m away, 21/42 -> 27/42 (settled after 1.5 / 2 s:
+20 / 15); pump closer 3/11 -> 4/11; 1.5-2.5 m from her 5/34 -> 6/34; beyond 2.5 m 14/121 -> 12/121; the caller
+under the slab within 1.5 m 13/27 -> 11/27, 1.5-2.5 m 5/42 -> 7/42, beyond 8/141 -> 9/141; 98 of the scan's
+435 detections near no caller. The scan does not hear either caller from farther away.
+
+Run: ``.venv/bin/python benchmarks/bench_audibility.py dense_pump [--step 0.5] [--listens 6] [--scan-s 3]``
 """
 from __future__ import annotations
 
