@@ -528,24 +528,3 @@ def test_a_caller_who_pauses_at_its_estimate_is_found_not_rejected_as_a_reflecti
     assert not [e for e in ev if e.decision is Decision.REJECTED], [str(e) for e in ev]
     found = found_events(ev)
     assert len(found) == 1 and math.dist(found[0].data["position"], caller.position[:2]) < 0.3
-
-
-def test_scanning_listens_only_searching_far_from_a_mapped_machine():
-    # A machine alone, 3 m ahead: once it is mapped as an interferer, listens away from it (over
-    # RescueConfig.scan_interferer_m = 2.5 m) are scanning ones (scan_listen_s = 3 s), those near it are 1 s.
-    class Reads(FakeAudio):
-        log = []
-
-        def read(self, n):
-            Reads.log.append((n, math.dist(w.pose()[:2], machine.position[:2])))
-            return super().read(n)
-
-    machine = Source((3.0, 0.0, 0.3), 72.0, voice=False)
-    w = World([machine], seed=3)
-    b = make(w, audio=Reads(w.clock))
-    b.run(max_time=120.0)
-    assert Reads.log[0] == (FS, 3.0)                       # nothing mapped yet: a 1 s listen
-    scans = [d for n, d in Reads.log if n == 3 * FS]
-    assert scans and min(scans) > 2.0                      # far from the machine (its estimate within 0.5 m)
-    assert all(n in (FS, 3 * FS) for n, _ in Reads.log)
-    assert any(n == FS and d < 2.0 for n, d in Reads.log)  # near it: short listens

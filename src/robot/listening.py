@@ -24,17 +24,15 @@ from typing import Any, Protocol, Sequence
 import numpy as np
 
 from robot.hal import AudioBlock, AudioSource, Clock, as_float_audio
-from robot.hearing import VAD_RATE, Hearing, HearingConfig, speech_fractions
+from robot.hearing import VAD_RATE, speech_fractions
 from robot.vad import SileroVad
-from ssl_core.beamform import beam_signal, level_db
+from ssl_core.beamform import beam_signal
 from ssl_core.grid import direction_from_angles
 
-__all__ = ["ListenEvidence", "Listen", "Listener", "VOICE_P", "NON_VOICE_P", "SCAN_MERGE_DEG"]
+__all__ = ["ListenEvidence", "Listen", "Listener", "VOICE_P", "NON_VOICE_P"]
 
 VOICE_P = 0.9          # a listen whose beam is speech (log-odds +2.2)
 NON_VOICE_P = 0.42     # a listen whose beam is not (log-odds -0.32: seven of them undo one with speech)
-SCAN_MERGE_DEG = 15.0  # a voice-scan direction this close in azimuth to a detection is that detection (the
-                       # audibility grid's tolerance, benchmarks/bench_audibility.py)
 
 
 class Detection(Protocol):
@@ -72,7 +70,6 @@ class Listen:
     evidence: list[ListenEvidence]
     n_detections: int
     ignored: list[str] = field(default_factory=list)
-    scan: list[float] = field(default_factory=list)   # voice-scan directions heard (azimuth, rad, array frame)
 
 
 class Listener:
@@ -81,72 +78,27 @@ class Listener:
     speech-frame fraction (0..1) toward that detection (replayed annotations, tests)."""
 
     def __init__(self, audio: AudioSource, clock: Clock, localizer: Any, mic_positions: np.ndarray | None,
-                 voice_threshold: float = 0.2, speech=None,
-                 scan_config: HearingConfig = HearingConfig(scan_step_deg=15.0, vad_on_s=1.0, vad_period_s=1.0,
-                                                            scan_settle_s=1.0)) -> None:
+                 voice_threshold: float = 0.2, speech=None) -> None:
         self.audio, self.clock, self.localizer = audio, clock, localizer
-        # The voice scan of listens with scan_s: listening all the time (a listen is short), settled after 1 s
-        # (benchmarks/bench_audibility.py --scan-s 3, dense_pump: the mid-room caller within 1.5 m, pump over
-        # 2.5 m away, found in 27 / 20 / 15 of 42 listens settling 1 / 1.5 / 2 s; 23 / 21 / 21 % of the
-        # detections near no caller)
-        self.scan_config = scan_config
         self.mic_positions = mic_positions
         self.voice_threshold = voice_threshold
         self.speech = speech
         self._vad: SileroVad | None = None   # created on first use (loads the ONNX model)
 
-    def listen(self, seconds: float, settle_s: float, min_power: float, scan_s: float = 0.0) -> Listen:
-        """Stand ``settle_s``, then listen ``max(seconds, scan_s)``: the localizer hears the last ``seconds``.
-        With ``scan_s`` > ``seconds`` (and the array geometry) the voice scan of ``robot.hearing`` hears the
-        whole of it (it needs ``scan_settle_s`` to settle): the direction on the horizon whose MPDR beam carries
-        speech is added as a voice bearing (elevation 0) unless a detection lies within ``SCAN_MERGE_DEG``."""
+    def listen(self, seconds: float, settle_s: float, min_power: float) -> Listen:
         self.clock.sleep(settle_s)
         self.audio.flush()
-        fs = self.audio.sample_rate
-        n_loc = max(1, int(round(seconds * fs)))
-        n = max(n_loc, int(round(scan_s * fs)))
+        n = max(1, int(round(seconds * self.audio.sample_rate)))
         t0 = self.clock.now()
         block = self.audio.read(n)
         # Listening takes the block's duration of clock time. Live and simulated sources let it pass
         # themselves; for one that does not (a file without a clock) let it pass here, standing still.
-        lag = n / fs - (self.clock.now() - t0)
+        lag = n / self.audio.sample_rate - (self.clock.now() - t0)
         if lag > 1e-9:
             self.clock.sleep(lag)
-        loc = block if n == n_loc else AudioBlock(block.samples[:, n - n_loc:], fs, block.timestamp + (n - n_loc) / fs)
-        result = self.localizer.locate(loc.samples)
+        result = self.localizer.locate(block.samples)
         dets: Sequence[Detection] = list(getattr(result, "detections", []) or [])
-        evidence, n_dets, ignored = self._evidence(loc, dets, self.clock.now(), min_power)
-        scan = self._scan(block.samples) if n > n_loc and self.mic_positions is not None else []
-        for az in scan:
-            evidence = self._merge_scan(evidence, az, loc.samples)
-        return Listen(block, evidence, n_dets, ignored, scan)
-
-    def _scan(self, samples: np.ndarray) -> list[float]:
-        """The voice scan over a whole listen (``robot.hearing.Hearing``, listening all the time, 0.1 s blocks):
-        its last detection's azimuth (rad, array frame), or none. Its score is averaged over ``scan_memory_s``,
-        so the last detection is the settled one."""
-        if self._vad is None:
-            self._vad = SileroVad(sample_rate=VAD_RATE)
-        fs = self.audio.sample_rate
-        hearing = Hearing(self.mic_positions, fs, self.scan_config, vad=self._vad)
-        x, step, last = as_float_audio(samples), fs // 10, []
-        for k in range(0, x.shape[-1], step):
-            hearing.update(x[:, k:k + step], [], (k + step) / fs)
-            last = hearing.voice_detections() or last
-        return [float(d.azimuth) for d in last]
-
-    def _merge_scan(self, evidence: list[ListenEvidence], azimuth: float, samples: np.ndarray
-                    ) -> list[ListenEvidence]:
-        """The scan heard speech toward ``azimuth``: unless a detection lies within ``SCAN_MERGE_DEG`` of it (that
-        detection's own beam says whether it is voice: a scan direction beside a machine's detection must not
-        make the machine a voice), a bearing on the horizon is added, with the delay-and-sum beam's level over
-        the localized part (the localizer's level measure: a level rise from a later listen is then no artefact)."""
-        if any(abs(math.remainder(e.azimuth - azimuth, 2 * math.pi)) <= math.radians(SCAN_MERGE_DEG)
-               for e in evidence):
-            return evidence
-        u = direction_from_angles(azimuth, 0.0)
-        level = float(level_db(beam_signal(as_float_audio(samples), self.mic_positions, u, self.audio.sample_rate)))
-        return evidence + [ListenEvidence(None, u, float(self.clock.now()), VOICE_P, level, 1.0, 0.0)]
+        return Listen(block, *self._evidence(block, dets, self.clock.now(), min_power))
 
     def _evidence(self, block: AudioBlock, dets: Sequence[Detection], time: float, min_power: float
                   ) -> tuple[list[ListenEvidence], int, list[str]]:

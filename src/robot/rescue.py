@@ -114,14 +114,6 @@ class RescueConfig:
     #                                        robot.vad.CHUNK_SPEECH_FRACTION = 0.2 separates dry 1 s chunks;
     #                                        reverberant beams of callers 2-4 m away have fewer)
     require_voice: bool = False            # approach only sources classified victim (not unclassified ones)
-    scan_listen_s: float = 3.0             # while an interferer is mapped, none within scan_interferer_m, and no
-    #                                        unfound victim, listen this long with the voice scan (robot.listening;
-    #                                        0: never): MPDR beams that cancel the machine hear a caller the SRP-PHAT
-    #                                        map misses. Measured (benchmarks/bench_audibility.py --scan-s 3,
-    #                                        dense_pump, 225 listens of 3 s): the mid-room caller within 1.5 m with
-    #                                        the pump over 2.5 m away heard in 27/42 scanning listens against 21/42
-    #                                        for three 1 s listens in the same time; no gain beyond 1.5 m of her
-    scan_interferer_m: float = 2.5         # ... (with the pump closer: 4/11 against 3/11, not worth 2 s)
     # geometry (shared with the sound map: one source of truth for the array height)
     array_height_m: float = 0.30           # array centre above the floor
     # found
@@ -384,7 +376,7 @@ class RescueBehaviour:
     def _listen(self) -> list[tuple[ListenEvidence, int]]:
         cfg = self.config
         self.motion.stand(cfg.settle_s)          # settling: odometry tracks the braking, then learns the gyro bias
-        res = self.listener.listen(cfg.listen_s, 0.0, cfg.min_power, cfg.scan_listen_s if self._scan_wanted() else 0.0)
+        res = self.listener.listen(cfg.listen_s, 0.0, cfg.min_power)
         self.motion.update_odometry(stationary=True)
         pose = self.pose
         assoc = self.map.update(res.evidence, pose, self.clock.now())
@@ -403,29 +395,17 @@ class RescueBehaviour:
                                f"is found victim #{self._victim_number(sid)}")
             else:
                 cands.append(row)
-        data = {"n_detections": res.n_detections, "candidates": cands, "ignored": ignored, "pose": pose.tolist(),
-                "scan_azimuths": res.scan}
-        scan = "".join(f"; voice scan heard speech at az {math.degrees(a):+.0f} deg" for a in res.scan)
+        data = {"n_detections": res.n_detections, "candidates": cands, "ignored": ignored, "pose": pose.tolist()}
         if cands:
             self._silent = 0
             desc = "; ".join(f"#{c['source']} {c['class']} az {math.degrees(c['azimuth']):+.0f} deg "
                              f"el {math.degrees(c['elevation']):+.0f} deg voice {c['voice']:.2f}" for c in cands)
-            self._emit(Decision.HEARD, desc + (f"; ignored: {'; '.join(ignored)}" if ignored else "") + scan, data)
+            self._emit(Decision.HEARD, desc + (f"; ignored: {'; '.join(ignored)}" if ignored else ""), data)
         else:
             self._silent += 1
             why = "no source detected" if not res.n_detections else "only ignored sources: " + "; ".join(ignored)
-            self._emit(Decision.NO_SOURCE, f"{why} (silent listen {self._silent}){scan}", data)
+            self._emit(Decision.NO_SOURCE, f"{why} (silent listen {self._silent})", data)
         return [(ev, sid) for ev, sid in assoc if self.map.source(sid).state is not SourceState.FOUND]
-
-    def _scan_wanted(self) -> bool:
-        """Listen with the voice scan: an interferer is mapped (it dominates what SRP-PHAT hears) but none within
-        ``scan_interferer_m`` (where the scan hears no more than SRP-PHAT), and no unfound victim is (the scan's
-        time is spent only while searching)."""
-        srcs = self.map.sources
-        machines = [s for s in srcs if s.cls is SourceClass.INTERFERER or s.state is SourceState.REJECTED]
-        return bool(machines) and min(s.distance_to(self.pose[:2]) for s in machines) > self.config.scan_interferer_m \
-            and not any(s.cls is SourceClass.VICTIM and s.state not in (SourceState.FOUND, SourceState.REJECTED)
-                        for s in srcs)
 
     # -- found ----------------------------------------------------------------------
     def _found_check(self, heard: list[tuple[ListenEvidence, int]]) -> bool:
