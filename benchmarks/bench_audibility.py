@@ -41,6 +41,25 @@ from ssl_sim.scenario import load_scenario
 BANDS = ((0.0, 1.5), (1.5, 2.5), (2.5, 99.0))   # m
 
 
+def _sounding(run: RescueRun, n0: int, n: int, min_share: float) -> np.ndarray:
+    """Per source: active (10 ms frames with RMS > 0.05) in at least ``min_share`` of samples n0..n0+n."""
+    out = []
+    for s in run.sources:
+        fr = s.signal.render(n0, n)[: n // 160 * 160].reshape(-1, 160)
+        out.append(float(np.mean(np.sqrt(np.mean(fr**2, axis=1)) > 0.05)) >= min_share)
+    return np.array(out)
+
+
+def _by_band(rows: list, k: int, sounding, hit) -> dict[str, list[int]]:
+    """[detected, sounding] listens of caller ``k`` per band of her distance and of the machine's."""
+    res = {}
+    for lo, hi in BANDS:
+        for mlo, mhi in ((0.0, 2.5), (2.5, 99.0)):
+            sel = [r for r in rows if sounding(r) and lo < r[0][k] <= hi and mlo < r[1] <= mhi]
+            res[f"{lo}-{hi} m, machine {mlo}-{mhi} m"] = [int(sum(hit(r) for r in sel)), len(sel)]
+    return res
+
+
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("scenario")
@@ -76,7 +95,6 @@ def main() -> None:
     settles = [float(v) for v in a.settle.split(",")] if a.scan_s > 0 else []
     scan_false = dict.fromkeys(settles, 0)   # scan detections after the settle near no caller
     scan_total = dict.fromkeys(settles, 0)
-    hearing = None
     if settles:
         from robot.hearing import Hearing, HearingConfig
         from robot.vad import SileroVad
@@ -118,36 +136,20 @@ def main() -> None:
             dets = run.localizer.locate(block.samples[:, :fs]).detections
             u = np.array([d.direction for d in dets]).reshape(-1, 3)
             hit = (u @ truth.T >= cos_tol).any(axis=0) if len(u) else np.zeros(len(names), bool)
-            sounding = []
-            for s in run.sources:   # in the first second (the 1 s listen's)
-                fr = s.signal.render(n0, fs)[: fs // 160 * 160].reshape(-1, 160)
-                sounding.append(float(np.mean(np.sqrt(np.mean(fr**2, axis=1)) > 0.05)) >= 0.1)
-            # for the scan: sounding anywhere in the block
-            scan_sounding = []
-            for s in run.sources:
-                fr = s.signal.render(n0, n)[: n // 160 * 160].reshape(-1, 160)
-                scan_sounding.append(float(np.mean(np.sqrt(np.mean(fr**2, axis=1)) > 0.05)) >= 0.1 * fs / n)
-            rows.append((dist, dist[machine] if machine is not None else math.inf, np.array(sounding), hit,
-                         scan_hits, np.array(scan_sounding)))
+            # sounding in the first second (the 1 s listen's); for the scan, a second's worth anywhere in the block
+            rows.append((dist, dist[machine] if machine is not None else math.inf, _sounding(run, n0, fs, 0.1), hit,
+                         scan_hits, _sounding(run, n0, n, 0.1 * fs / n)))
     cpu = time.process_time() - t0
     out = {"scenario": a.scenario, "points": len(points), "listens": len(rows), "cpu_s": round(cpu, 1), "callers": {}}
     print(f"{a.scenario}: {len(points)} points x {a.listens} listens, {cpu:.0f} s CPU; detected within "
           f"{a.tolerance:g} deg / sounding listens"
           + (f"; machine = {names[machine]}" if machine is not None else ""))
     for k in range(run.n_victims):
-        res = {}
-        for lo, hi in BANDS:
-            for mlo, mhi in ((0.0, 2.5), (2.5, 99.0)):
-                sel = [r for r in rows if r[2][k] and lo < r[0][k] <= hi and mlo < r[1] <= mhi]
-                res[f"{lo}-{hi} m, machine {mlo}-{mhi} m"] = [int(sum(r[3][k] for r in sel)), len(sel)]
+        res = _by_band(rows, k, lambda r: r[2][k], lambda r: r[3][k])
         out["callers"][names[k]] = res
         print(f"  {names[k]} ({kinds[k]}): " + "; ".join(f"{key}: {h}/{n}" for key, (h, n) in res.items()))
         for st in (["srp"] + settles) if settles else []:
-            sres = {}
-            for lo, hi in BANDS:
-                for mlo, mhi in ((0.0, 2.5), (2.5, 99.0)):
-                    sel = [r for r in rows if r[5][k] and lo < r[0][k] <= hi and mlo < r[1] <= mhi]
-                    sres[f"{lo}-{hi} m, machine {mlo}-{mhi} m"] = [int(sum(r[4][st][k] for r in sel)), len(sel)]
+            sres = _by_band(rows, k, lambda r: r[5][k], lambda r: r[4][st][k])
             label = (f"SRP-PHAT 1 s listens for {a.scan_s:g} s" if st == "srp"
                      else f"scan {a.scan_s:g} s, settle {st:g} s")
             out["callers"][f"{names[k]} {label}"] = sres
