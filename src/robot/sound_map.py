@@ -554,18 +554,6 @@ class SoundMap:
         chi2 = np.where(np.hypot(v[:, 0], v[:, 1]) >= NEAR_CROSSING_M, chi2, np.inf)
         return float(chi2.min())
 
-    def _below_floor(self, src: _Source, origin: np.ndarray, d: np.ndarray) -> bool:
-        """A ray pointing down meets the floor (z = 0) at a horizontal range ``h / tan(-el)`` from the array at
-        height ``h``; a source mapped farther than where it meets the floor with the elevation 2 sigma shallower
-        cannot be what it heard (the ray would pass under the floor). Measured, dense_pump seed 12: the mid-room
-        caller heard at -29 deg from 0.38 m joined the pump's image mapped 2.3 m away (its estimate +- 1.22 m),
-        which the robot then drove to check instead of her."""
-        el = math.asin(max(-1.0, min(1.0, float(d[2]))))
-        steep = -el - 2 * math.radians(self.config.elevation_sigma_deg)
-        if steep <= 0:
-            return False
-        return float(np.hypot(*(src.position[:2] - origin[:2]))) > origin[2] / math.tan(steep)
-
     def _associate(self, ev: BearingEvidence, origin: np.ndarray, d: np.ndarray, taken: set[int]) -> int | None:
         cfg = self.config
         scores = []
@@ -577,8 +565,6 @@ class SoundMap:
                 # Rejected (a reflection, a machine) is a verdict on a place: a bearing that does not point there is
                 # another source's, not a reason to move it (measured in a scripted test: a ghost rejected 0.65 m
                 # short of a caller took her rays, moved onto her and hid her for the rest of the run).
-                continue
-            if self._below_floor(s, origin, d):
                 continue
             m = self._mahalanobis(s, origin, d) if not s.rays or _crossing_deg(s.rays) >= cfg.min_pair_angle_deg \
                 else self._along_ray(s, origin, d)   # (no rays: placed by add_found, a point with its covariance)
