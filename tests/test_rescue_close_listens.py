@@ -212,3 +212,37 @@ def test_a_map_estimate_with_a_steep_bearing_declares_the_caller_on_entering_rea
     assert all(d is not None and d <= 0.75 for d in old + new)
     assert all(n >= o - 1e-6 for o, n in zip(old, new))
     assert sum(n - o >= 0.15 for o, n in zip(old, new)) >= 2
+
+
+class FloorImageLocalizer(FakeLocalizer):
+    """Every machine also heard in the first two listens at its floor image: the same azimuth, the elevation
+    of the source mirrored in the floor (z -> -z: seen from the array at height h, ``-atan((h + z) / r)``), 3.6 dB
+    weaker (as the pump of dense_pump seed 3: +2 and -37 deg)."""
+
+    def locate(self, samples):
+        res = super().locate(samples)
+        if self.calls > 2:
+            return res
+        x, y, _ = self.world.pose()
+        images = []
+        for d, s in zip(res.detections, sorted(self.world.sources, key=lambda s: -self._level(s, x, y))):
+            if not s.voice:
+                r = math.hypot(s.position[0] - x, s.position[1] - y)
+                el = -math.atan2(self.world.array_height + s.position[2], r)
+                images.append(Det(d.azimuth, el, d.power * 0.3, d.level_db - 3.6, False))
+        return Result(res.detections + images)
+
+    def _level(self, s, x, y):
+        d3 = math.dist(s.position, (x, y, self.world.array_height))
+        return s.level_db - 20 * math.log10(max(d3, 0.05))
+
+
+def test_the_floor_image_of_a_machine_above_the_array_is_no_victim():
+    # A pump standing higher than the array, 0.9 m away (heard +4 deg up); its floor image -39 deg down at its
+    # azimuth, weaker, in the first two listens (a step apart: the image triangulates). No one calls: truth, no victim.
+    pump = Source((0.9, 0.0, 0.36), 75.0, voice=False)
+    w = World([pump], seed=8)
+    ev = make(w, RescueConfig(max_victims=1), localizer=FloorImageLocalizer(w)).run(max_time=60.0)
+    steep = [e for e in ev if e.decision is Decision.HEARD and min(c["elevation"] for c in e.data["candidates"]) < -0.5]
+    assert len(steep) == 2                       # the image was heard, steep, in both listens
+    assert not found_events(ev)

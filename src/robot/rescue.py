@@ -143,8 +143,8 @@ class RescueConfig:
     #                                        0.71 m, 1.03 vs 1.05 m, 0.87 vs 0.81 m, 0.45-0.58 vs 0.32-0.51 m);
     #                                        the two heard at -11 and -13 deg were false founds 1.05 and 0.81 m
     #                                        from the caller behind the slab (half_buried_slab seeds 1, 3)
-    echo_azimuth_deg: float = 30.0         # a steep bearing heard from the spot where a shallower one below the
-    #                                        horizon (< reach_elevation_deg), at least as loud, was heard this close
+    echo_azimuth_deg: float = 30.0         # a steep bearing heard from the spot where a shallower one (within
+    #                                        reach_elevation_deg of the horizon), at least as loud, was heard this close
     #                                        in azimuth is an echo, no found cue. Measured, light rubble and half_buried
     #                                        seeds 0-15, three versions: 16 such pairs in one listen; the 12 heard
     #                                        0.99-1.6 m from the nearest caller (3 false founds among them) had the
@@ -579,13 +579,15 @@ class RescueBehaviour:
         return np.array([x + r * math.cos(a), y + r * math.sin(a), self.map.config.source_height_m])
 
     def _floor_echo(self, ev: ListenEvidence) -> bool:
-        """A steep bearing no louder than a shallower one below the horizon within ``echo_azimuth_deg`` of it,
-        heard from the same spot (in this listen or an earlier one from here): an echo of a caller beyond reach
-        (off the floor or debris, or an elevation side lobe), no found cue. A mouth right below is the loudest
-        sound in its direction."""
+        """A steep bearing no louder than a shallower one (within ``reach_elevation_deg`` of the horizon, above or
+        below it) within ``echo_azimuth_deg`` of it, heard from the same spot (in this listen or an earlier one
+        from here): an echo of a source beyond reach (off the floor or debris, or an elevation side lobe), no found
+        cue. A mouth right below is the loudest sound in its direction. Above the horizon too: a machine standing
+        higher than the array has its floor image steep below it (dense_pump seed 3: the pump at +2 deg, 0.9 m
+        away, and its image at -37 deg, 3.6 dB weaker, at the same azimuth, declared a victim at 29.85 s)."""
         cfg = self.config
         return any(o is not ev and abs(wrap_angle(o.azimuth - ev.azimuth)) <= math.radians(cfg.echo_azimuth_deg)
-                   and ev.elevation < o.elevation <= 0.0 and -math.degrees(o.elevation) < cfg.reach_elevation_deg
+                   and ev.elevation < o.elevation and abs(math.degrees(o.elevation)) < cfg.reach_elevation_deg
                    and ev.level_db <= o.level_db for o in self._evidence)
 
     def _listen_again(self, s: MapSource, why: str) -> bool:
