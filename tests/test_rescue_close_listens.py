@@ -90,12 +90,10 @@ class ReverberantLocalizer(FakeLocalizer):
     def locate(self, samples):
         res = super().locate(samples)
         x, y, _ = self.world.pose()
-        out = []
-        for d, s in zip(res.detections, sorted(self.world.sources, key=lambda s: -s.level_db)):
-            if math.hypot(s.position[0] - x, s.position[1] - y) > self.direct_m:
-                d = Det(d.azimuth, math.radians(-35.0), 0.06, d.level_db, d.voice)
-            out.append(d)
-        return Result(out)
+        (caller,) = self.world.sources
+        if math.hypot(caller.position[0] - x, caller.position[1] - y) <= self.direct_m:
+            return res
+        return Result([Det(d.azimuth, math.radians(-35.0), 0.06, d.level_db, d.voice) for d in res.detections])
 
 
 def test_a_steep_bearing_with_a_weak_srp_peak_is_no_found_cue():
