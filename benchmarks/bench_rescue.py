@@ -1,4 +1,4 @@
-"""Rescue sweep: the map-planning behaviour beside the old reactive one, measured in the same run.
+"""Rescue sweep: this tree's behaviour beside a baseline version of it (``--baseline``), measured in the same run.
 
 For each code version (this tree's ``src`` and the ``--baseline`` git ref's ``src``, extracted with
 ``git archive`` into a temporary directory) a worker process runs every scenario x seed as ``ssl-rescue sweep``
@@ -192,9 +192,9 @@ def main(argv: list[str] | None = None) -> int:
         seeds = sorted({r["seed"] for r in rows["new"]})
         new, old = _table(rows["new"]), (_table(rows["old"]) if "old" in rows else None)
     print(f"seeds {seeds}; light_rubble_three limited to {TIME_LIMITS['light_rubble_three']:g} s\n")
-    print("map-planning behaviour (this tree):\n" + _markdown(new) + "\n")
+    print("this tree:\n" + _markdown(new) + "\n")
     if old:
-        print(f"old reactive behaviour ({args.baseline_src or args.baseline}):\n" + _markdown(old) + "\n")
+        print(f"baseline ({args.baseline_src or args.baseline}):\n" + _markdown(old) + "\n")
     print(json.dumps({"bench": "rescue", "seeds": seeds, "new": new, "old": old,
                       "wall_s": round(time.perf_counter() - t0, 1)}))
     return 0

@@ -87,7 +87,7 @@ def test_path_length_matches_the_physics_trajectory():
 def test_three_callers_in_light_rubble_found_over_four_seeds():
     """Seeds 0-3 of the shipped scenario (240 s): at least 11 of the 12 callers found (the issue's 23 of 24, with
     one miss of margin), none declared falsely. Over seeds, not one run: a run is chaotic (one different listen
-    changes the path). Measured: 12 of 12 (README, rescue benchmark, session 4: 47 of 48 on seeds 0-15 in 180 s;
+    changes the path). Measured: 12 of 12 (README, rescue benchmark, sessions 4 and 5: 47 of 48 on seeds 0-15 in 180 s;
     8 of 12 was the bound while seed 0 ended wedged on debris)."""
     found, false = 0, 0
     for seed in range(4):
