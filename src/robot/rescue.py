@@ -154,17 +154,17 @@ class RescueConfig:
     supporting_elevation_deg: float = 10.0  # a bearing this far below horizontal points down at a mouth on the floor
     #                                        within ~1.1 m of the 0.3 m high array (bump criterion 4); one at its
     #                                        estimate heard shallower is farther away (refute_after_listens) ...
+    supporting_rise_db: float = 3.0        # ... and louder than its faintest listen (a mirror image beyond a wall
+    #                                        triangulates tightly too: measured, 2 false finds in light rubble)
     found_min_power: float = 0.075         # criteria 1-3 need the bearing heard now at this normalised SRP-PHAT peak
     #                                        power or more: within reach a mouth is inside the critical distance
     #                                        (~0.75 m at RT60 0.6 s in these rooms), its direct sound dominates.
     #                                        Measured (84 stored runs, all scenarios): callers' true bearings
     #                                        within 0.5 m had power 0.10 (5th pct) / 0.24 (median), wrong ones
-    #                                        0.07 (median); the lowest of ~150 true finds 0.083-0.12, the false
-    #                                        found 3.9 m behind the partition 0.061 (behind_partition seed 4).
+    #                                        0.07 (median); no true find of ~150 below 0.083; the false found
+    #                                        3.9 m behind the partition 0.061 (behind_partition seed 4).
     #                                        Seeds 0-15 against 0: that false found gone (the caller then not
     #                                        reached in time), light rubble, half_buried, generator unchanged
-    supporting_rise_db: float = 3.0        # ... and louder than its faintest listen (a mirror image beyond a wall
-    #                                        triangulates tightly too: measured, 2 false finds in light rubble)
     bump_found_range_m: float = 0.8        # criterion 4: bump while driving at a target estimated this close
     bump_ahead_deg: float = 35.0           # ... and this close to the direction of motion
     bump_heard_within_s: float = 10.0      # ... and heard this recently (2-3 listen cycles: a caller is heard in most;
