@@ -53,9 +53,9 @@ class ListenEvidence:
     voice_probability: float
     level_db: float                # beam level (dB re full-scale sine), or 10 lg SRP power without geometry
     activity: float
-    speech_fraction: float = 0.0   # VAD frames called speech in the beam (0..1)
-    power: float = 1.0             # normalised SRP-PHAT peak power of the detection (0..1): how much of the
+    power: float                   # normalised SRP-PHAT peak power of the detection (0..1): how much of the
                                    # sound arrives as one plane wave (a mouth within the critical distance: high)
+    speech_fraction: float = 0.0   # VAD frames called speech in the beam (0..1)
 
     @property
     def azimuth(self) -> float:
@@ -133,6 +133,6 @@ class Listener:
             if level is None:
                 level = 10 * math.log10(max(float(d.power), 1e-20))
             p = VOICE_P if frac >= self.voice_threshold else NON_VOICE_P
-            out.append(ListenEvidence(None, u, float(time), p, float(level),
-                                      1.0, float(frac), float(d.power)))   # detected in this listen: sounding
+            out.append(ListenEvidence(None, u, float(time), p, float(level), activity=1.0,   # detected: sounding
+                                      power=float(d.power), speech_fraction=float(frac)))
         return out, len(dets), ignored
