@@ -5,6 +5,7 @@ import math
 import numpy as np
 import pytest
 
+from robot.coverage import ListeningCoverage
 from robot.occupancy import OccupancyConfig, OccupancyGrid
 from robot.planner import Planner, PlannerConfig
 from robot.sound_map import MapSource, SourceClass, SourceState
@@ -16,6 +17,14 @@ def _wall_grid():
     for y in np.arange(-1.0, 1.51, 0.25):
         g.mark_contact((2.0 - 0.17, y), 0.0)
     return g
+
+
+def _listened(g, points, machines=()):
+    """Listening coverage of grid ``g`` after a listen at each of ``points`` (world x, y)."""
+    cov = ListeningCoverage(g.origin, g.n, g.resolution)
+    for p in points:
+        cov.listened(p, machines)
+    return cov
 
 
 def test_contact_marks_a_face_ahead_and_driving_clears():
@@ -82,10 +91,11 @@ def test_current_target_kept_unless_clearly_better():
     assert pl.choose_target([a, b], g, (0, 0, 0), 10.0, current=1)[0].id == 1
 
 
-def test_explore_goes_to_unvisited_floor_away_from_found_victims():
+def test_explore_goes_to_unheard_floor_away_from_found_victims():
     g = OccupancyGrid()
-    g.mark_path((-3.0, 0.0), (0.0, 0.0))               # came from -x
-    plan, why = Planner().explore_goal(g, (0.0, 0.0, 0.0), avoid=[np.array([0.0, -1.0])])
+    g.mark_path((-3.0, 0.0), (0.0, 0.0))               # came from -x, listening every 0.6 m
+    cov = _listened(g, [(x, 0.0) for x in np.arange(-3.0, 0.01, 0.6)])
+    plan, why = Planner().explore_goal(g, (0.0, 0.0, 0.0), cov, avoid=[np.array([0.0, -1.0])])
     goal = plan.waypoints[-1]
     assert goal[0] > -0.3 and goal[1] > -0.3           # not back along the path, not toward the found victim
 
@@ -131,7 +141,7 @@ def _pocket():
 def test_explore_leaves_a_covered_pocket_through_its_only_gap():
     g = _pocket()
     pl = Planner(PlannerConfig(explore_distance_m=1.2))
-    plan, why = pl.explore_goal(g, (0.0, 0.0, 0.0))
+    plan, why = pl.explore_goal(g, (0.0, 0.0, 0.0), _listened(g, [(-0.3, 0.0), (0.6, 0.0), (1.3, 0.0)]))
     assert plan is not None, why
     pts = np.vstack([[0.0, 0.0], plan.waypoints])
     assert plan.waypoints[-1][1] > 0.5                                 # out of the pocket, north
@@ -150,23 +160,25 @@ def test_config_errors_name_the_field():
         OccupancyConfig(stall_log_odds=3.0)
 
 
-def test_explore_leads_away_from_a_machine_and_frontier_goals_stay_near_covered_floor():
-    """Covered floor along y = 0 from x = -2 to x = 2, the robot at the origin, a machine at (-2.5, 0): the goal
-    lies on the side away from it, and a frontier goal is unvisited floor next to the covered strip."""
+def test_explore_listens_out_of_a_machine_s_masking_and_frontier_goals_stay_near_covered_floor():
+    """Covered floor along y = 0 from x = -2 to x = 2, listened to from the origin, a machine at (-2.5, 0): the
+    goal lies where a listen is not masked by it (2.5 m or more from it), and a frontier goal is unvisited floor
+    next to the covered strip."""
     g = OccupancyGrid(OccupancyConfig(size_m=12.0))
     g.mark_path((-2.0, 0.0), (2.0, 0.0))
     cfg = PlannerConfig()
-    plan, why = Planner(cfg).explore_goal(g, (0.0, 0.0, 0.0), machines=[np.array([-2.5, 0.0])])
+    machine = [np.array([-2.5, 0.0])]
+    cov = _listened(g, [(0.0, 0.0)], machine)
+    plan, why = Planner(cfg).explore_goal(g, (0.0, 0.0, 0.0), cov, machines=machine)
     assert plan is not None, why
-    goal = plan.waypoints[-1]
-    assert goal[0] > 0.5, why                                      # away from the machine
-    plan, why = Planner(cfg)._frontier_goal(g, (0.0, 0.0), [], [np.array([-2.5, 0.0])],
+    assert np.hypot(*(plan.waypoints[-1] - machine[0])) >= cov.config.masked_within_m, why
+    plan, why = Planner(cfg)._frontier_goal(g, (0.0, 0.0), cov.gain(machine), None, [],
                                             Planner(cfg).distances(g, (0.0, 0.0)))
     assert plan is not None, why
     visited = np.argwhere(g.visited > 0)
     gap = np.min(np.hypot(*(g.centre(visited) - plan[0].waypoints[-1]).T))
     assert gap <= cfg.frontier_reach_m + g.resolution, why         # not deep in the unknown (a wall may be there)
-    assert plan[0].waypoints[-1][0] > 0.5, why
+    assert np.hypot(*(plan[0].waypoints[-1] - machine[0])) >= cov.config.masked_within_m, why
 
 
 def test_machine_image_needs_no_voice_and_the_machine_near_or_on_its_bearings():

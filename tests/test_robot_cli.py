@@ -87,10 +87,13 @@ def test_set_reaches_the_behaviours_other_configs(recording, monkeypatch):
 
     monkeypatch.setattr(cli, "RescueBehaviour", Recorded)
     code, _ = run(["--dry-run", "--replay", str(recording), "--max-time", "2", "--set", "travel.loaded_speed=5.0",
-                   "--set", "planner.frontier_reach_m=0.8", "--set", "listen_s=0.5"])
+                   "--set", "planner.frontier_reach_m=0.8", "--set", "listen_s=0.5",
+                   "--set", "coverage.area=-1,-3,6,3"])
     assert code == 0 and len(made) == 1
     b = made[0]
     assert b.odometry.travel.loaded_speed == 5.0 and b.planner.config.frontier_reach_m == 0.8
+    assert b.coverage.config.area == (-1.0, -3.0, 6.0, 3.0) and b.coverage.in_area[b.grid.cell((5.9, 2.9))]
+    assert not b.coverage.in_area[b.grid.cell((6.1, 0.0))]
     assert b.config.listen_s == 0.5
 
 
@@ -109,6 +112,8 @@ def test_bad_arguments_are_named(recording, tmp_path, capsys):
     assert "unknown section 'wheels'" in capsys.readouterr().err
     assert run(["--dry-run", "--replay", str(recording), "--set", "travel.loaded_speed=-1"])[0] == 2
     assert "loaded_speed" in capsys.readouterr().err
+    assert run(["--dry-run", "--replay", str(recording), "--set", "coverage.area=3,0,1,2"])[0] == 2
+    assert "CoverageConfig.area" in capsys.readouterr().err
     four = tmp_path / "four.wav"
     wavfile.write(four, FS, np.zeros((100, 4), np.int16))
     assert run(["--dry-run", "--replay", str(four)])[0] == 2

@@ -17,6 +17,7 @@ import math
 import sys
 
 from robot.config_values import field_values
+from robot.coverage import CoverageConfig
 from robot.hal import Clock, ManualClock, WallClock
 from robot.interrupt import check_interrupt, deferred_sigint
 from robot.motion import MotionConfig
@@ -63,9 +64,11 @@ def _parser() -> argparse.ArgumentParser:
 
 
 # ``--set SECTION.FIELD=VALUE`` reaches these configs of the behaviour (a plain FIELD: ``RescueConfig``); e.g. the
-# odometry's loaded-wheel threshold must be measured on the robot's open-loop drive (``TravelConfig``).
+# odometry's loaded-wheel threshold must be measured on the robot's open-loop drive (``TravelConfig``), and the
+# area to search is the room's floor relative to the start pose (``--set coverage.area=-1,-3,6,3``).
 _SECTIONS = {"motion": MotionConfig, "sound_map": SoundMapConfig, "planner": PlannerConfig,
-             "occupancy": OccupancyConfig, "gyro": GyroFusionConfig, "travel": TravelConfig}
+             "occupancy": OccupancyConfig, "gyro": GyroFusionConfig, "travel": TravelConfig,
+             "coverage": CoverageConfig}
 
 
 def _rescue_config(args) -> tuple[RescueConfig, dict]:

@@ -16,11 +16,11 @@ Frames: world/odometry frame (x, y in m). Inputs are the ``SoundMap``'s sources 
 * **path** (``plan``): Dijkstra (``scipy.sparse.csgraph``) on the grid's free cells (unknown counts as
   free: only touch tells obstacles), 16-connected, to the nearest cell within ``stop_radius`` of the goal;
   then shortened to line-of-sight waypoints.
-* **exploration** (``explore_goal``): ``explore_headings`` points ``explore_distance_m`` away; the one with
-  most unvisited floor around it, reachable, preferring directions away from found victims (their calls
-  mask fainter ones) and, more so, from mapped interferers; or, when that is better once path lengths are counted
-  against both, the best unvisited reachable cell near covered floor (frontier: the way out of a covered pocket of
-  rubble).
+* **exploration** (``explore_goal``): ``explore_headings`` points ``explore_distance_m`` away; the reachable one
+  where a listen would hear most of the floor not yet listened to (``robot.coverage``: a mapped machine's
+  masking counted there), preferring directions away from found victims (their calls mask fainter ones); or,
+  when that is better once path lengths are counted against both, the best such unvisited reachable cell near
+  covered floor (frontier: the way out of a covered pocket of rubble).
 """
 from __future__ import annotations
 
@@ -33,6 +33,7 @@ from scipy import ndimage, sparse
 from scipy.sparse.csgraph import dijkstra
 
 from robot.config_values import need
+from robot.coverage import ListeningCoverage
 from robot.occupancy import OccupancyGrid
 from robot.sound_map import MapSource, SourceClass, SourceState
 
@@ -85,13 +86,6 @@ class PlannerConfig:
     machine_image_radius_m: float = 1.5
     image_bearing_deg: float = 12.0    # ... or most of its bearings pointed this close to the machine (the sound
     #                                    map's inlier_deg: a bearing this close supports the machine's position)
-    # Exploring, a goal farther from a mapped interferer than the robot is scores up to this many times the
-    # away bonus of a found victim (``explore_goal``; each explore_distance_m farther counts once): beside a
-    # machine its sound masks the callers. Measured in dense_pump, 1 s standing listens on a 0.5 m grid of the
-    # reachable floor (6 per point): the mid-room caller, within 1.5 m of her, was detected (15 deg) in 27 of 54
-    # of her sounding listens with the pump over 2.5 m away but 2 of 16 with it closer; from farther than 1.5 m in
-    # 12 of 210. The way out of a machine's neighbourhood is worth a longer path.
-    machine_away_max: float = 3.0
     # A frontier goal is unvisited floor at most this far from floor the robot has covered (Yamauchi's frontier:
     # known floor meets unknown). Touch maps walls only where met, so a cell deep in the unknown may lie beyond one:
     # dense_pump seed 2 (with the away-from-machine bonus) drove for 80 s at frontier goals 1.5 m outside the room.
@@ -111,7 +105,6 @@ class PlannerConfig:
         need(self, self.explore_distance_m > 0, "explore_distance_m", "> 0 m")
         need(self, self.explore_headings >= 4, "explore_headings", "an integer >= 4")
         need(self, self.machine_image_radius_m >= 0, "machine_image_radius_m", ">= 0 m")
-        need(self, self.machine_away_max >= 1, "machine_away_max", ">= 1")
         need(self, self.frontier_reach_m > 0, "frontier_reach_m", "> 0 m")
         need(self, 0 <= self.image_bearing_deg < 90, "image_bearing_deg", "in [0, 90) degrees")
 
@@ -283,15 +276,16 @@ class Planner:
                     return True
         return False
 
-    def explore_goal(self, grid: OccupancyGrid, pose, avoid: Sequence[np.ndarray] = (),
+    def explore_goal(self, grid: OccupancyGrid, pose, coverage: ListeningCoverage, avoid: Sequence[np.ndarray] = (),
                      machines: Sequence[np.ndarray] = ()) -> tuple[Plan | None, str]:
-        """A reachable point ``explore_distance_m`` away with the most unvisited floor around it, away from the
-        points ``avoid`` (found victims) and, more so, from ``machines`` (mapped interferers, world x, y)."""
+        """A reachable point ``explore_distance_m`` away where a listen would hear most of the floor not yet
+        listened to (``coverage``), away from the points ``avoid`` (found victims) and, more so, from
+        ``machines`` (mapped interferers, world x, y)."""
         cfg = self.config
         x, y = float(pose[0]), float(pose[1])
         search = self.distances(grid, (x, y))
         best = None
-        unvisited = (grid.visited == 0) & ~grid.blocked
+        gain = coverage.gain(machines)
         occupied = grid.occupied
         r = int(round(1.0 / grid.resolution))   # judge a direction by the floor within 1 m of its goal
         for k in range(cfg.explore_headings):
@@ -301,42 +295,42 @@ class Planner:
             if not grid.inside(ij) or grid.blocked[ij]:
                 continue
             box = (slice(max(0, ij[0] - r), ij[0] + r + 1), slice(max(0, ij[1] - r), ij[1] + r + 1))
-            # Unvisited floor draws; known obstacles there (walls met before) push away.
-            score = float(unvisited[box].mean()) - 3.0 * float(occupied[box].mean())
-            score += float(self._away(goal[None], (x, y), avoid, machines)[0])
+            # Floor not yet listened to draws; known obstacles there (walls met before) push away.
+            score = float(gain[ij]) - 3.0 * float(occupied[box].mean())
+            score += float(self._away(goal[None], (x, y), avoid)[0])
             plan = self.plan(grid, (x, y), goal, stop_radius=0.2, _search=search)
             if plan is None or plan.length > 2.0 * cfg.explore_distance_m:
                 continue
             if best is None or score > best[0]:
                 best = (score, plan, math.degrees(a))
-        far, far_why = self._frontier_goal(grid, (x, y), avoid, machines, search)
+        far, far_why = self._frontier_goal(grid, (x, y), gain, coverage.in_area if coverage.config.area else None,
+                                           avoid, search)
         # The ring's best against the best unvisited cell anywhere, each worth its score over (1 + path length /
         # distance_scale_m) as a target is: in a pocket of rubble whose floor is covered the ring offers only
         # visited floor (measured, dense_pump: the robot circled its start for 100-250 s), the way out leads on.
         if best is not None and (far is None or self._worth(best[0], best[1].length) >= far[1]):
             self._frontier = None
-            return best[1], f"toward unvisited floor at {best[2]:.0f} deg (world), {best[0]:.2f} unvisited/away score"
+            return best[1], f"toward unheard floor at {best[2]:.0f} deg (world), {best[0]:.2f} unheard/away score"
         if far is None:
             return None, far_why
         return far[0], far_why
 
-    def _away(self, goals: np.ndarray, xy, avoid: Sequence[np.ndarray], machines: Sequence[np.ndarray]) -> np.ndarray:
-        """Bonus of ``goals`` (..., 2) for leading away from found victims and machines: their sound masks fainter
-        sources. 0.5 per ``explore_distance_m`` farther than the robot is, within -1..1 of that for a found
-        victim, -1..``machine_away_max`` for a machine."""
+    def _away(self, goals: np.ndarray, xy, avoid: Sequence[np.ndarray]) -> np.ndarray:
+        """Bonus of ``goals`` (..., 2) for leading away from found victims: their calls mask fainter sources.
+        0.5 per ``explore_distance_m`` farther than the robot is, within -0.5..0.5. (A machine's masking is in
+        the listening coverage's gain.)"""
         cfg = self.config
         out = np.zeros(goals.shape[:-1])
-        for pts, top in ((avoid, 1.0), (machines, cfg.machine_away_max)):
-            for p in pts:
-                d = np.hypot(goals[..., 0] - p[0], goals[..., 1] - p[1]) - math.hypot(xy[0] - p[0], xy[1] - p[1])
-                out += 0.5 * np.clip(d / cfg.explore_distance_m, -1, top)
+        for p in avoid:
+            d = np.hypot(goals[..., 0] - p[0], goals[..., 1] - p[1]) - math.hypot(xy[0] - p[0], xy[1] - p[1])
+            out += 0.5 * np.clip(d / cfg.explore_distance_m, -1, 1)
         return out
 
     def _worth(self, score, length):
         return np.maximum(score, 0.0) / (1.0 + length / self.config.distance_scale_m)
 
-    def _frontier_goal(self, grid: OccupancyGrid, xy, avoid: Sequence[np.ndarray], machines: Sequence[np.ndarray],
-                       search) -> tuple[tuple[Plan, float] | None, str]:
+    def _frontier_goal(self, grid: OccupancyGrid, xy, gain: np.ndarray, area: np.ndarray | None,
+                       avoid: Sequence[np.ndarray], search) -> tuple[tuple[Plan, float] | None, str]:
         """The best unvisited reachable cell anywhere (frontier exploration, Yamauchi 1997) at least
         ``explore_distance_m`` along the path, scored as the ring's goals, worth that score (if positive) over
         (1 + path length / ``distance_scale_m``): ``((plan, worth), why)`` or ``(None, why)``."""
@@ -348,12 +342,12 @@ class Planner:
         length[reach] = dist[idx[reach]]
         size = 2 * int(round(1.0 / grid.resolution)) + 1   # the floor within 1 m, as in explore_goal
         unvisited = (grid.visited == 0) & ~grid.blocked
-        score = ndimage.uniform_filter(unvisited.astype(float), size, mode="constant") \
-            - 3.0 * ndimage.uniform_filter(grid.occupied.astype(float), size, mode="constant")
+        score = gain - 3.0 * ndimage.uniform_filter(grid.occupied.astype(float), size, mode="constant")
         centres = grid.origin + (np.indices(idx.shape).transpose(1, 2, 0) + 0.5) * grid.resolution
-        score += self._away(centres, xy, avoid, machines)
-        near_covered = ndimage.distance_transform_edt(grid.visited == 0) * grid.resolution <= cfg.frontier_reach_m
-        ok = reach & unvisited & near_covered & (length >= cfg.explore_distance_m)
+        score += self._away(centres, xy, avoid)
+        if area is None:
+            area = ndimage.distance_transform_edt(grid.visited == 0) * grid.resolution <= cfg.frontier_reach_m
+        ok = reach & unvisited & area & (length >= cfg.explore_distance_m)
         utility = np.where(ok, self._worth(score, np.where(ok, length, 0.0)), -np.inf)
         ij = np.unravel_index(int(np.argmax(utility)), utility.shape)
         # The frontier goal chosen before, while still unvisited, reachable and not reached, counts keep_factor
@@ -376,4 +370,4 @@ class Planner:
             return None, "no reachable unexplored direction or floor on the learned grid"
         self._frontier = goal
         return (plan, float(utility[ij])), (f"toward the unvisited floor at ({goal[0]:.2f}, {goal[1]:.2f}) (frontier),"
-                                            f" {plan.length:.2f} m of path, {score[ij]:.2f} unvisited/away score")
+                                            f" {plan.length:.2f} m of path, {score[ij]:.2f} unheard/away score")

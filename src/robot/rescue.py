@@ -48,6 +48,7 @@ from typing import Any
 
 import numpy as np
 
+from robot.coverage import CoverageConfig, ListeningCoverage
 from robot.hal import AudioSource, Clock, DriveBase, DriveStatus
 from robot.kinematics import OmniDriveParams
 from robot.listening import ListenEvidence, Listener
@@ -278,6 +279,7 @@ class RescueBehaviour:
                  sound_map: SoundMapConfig = SoundMapConfig(), planner: PlannerConfig = PlannerConfig(),
                  occupancy: OccupancyConfig = OccupancyConfig(), params: OmniDriveParams = OmniDriveParams(),
                  gyro: GyroFusionConfig = GyroFusionConfig(), travel: TravelConfig = TravelConfig(),
+                 coverage: CoverageConfig = CoverageConfig(),
                  start_pose=(0.0, 0.0, 0.0), geometry=None, speech=None) -> None:
         self.audio, self.drive, self.clock, self.localizer, self.config = audio, drive, clock, localizer, config
         geometry = geometry if geometry is not None else getattr(localizer, "geometry", None)
@@ -293,6 +295,7 @@ class RescueBehaviour:
         self.listener = Listener(audio, clock, localizer, mics, config.voice_threshold, speech)
         self.map = SoundMap(dataclasses.replace(sound_map, array_height_m=config.array_height_m))
         self.grid = OccupancyGrid(occupancy, origin=np.asarray(start_pose, float)[:2])
+        self.coverage = ListeningCoverage(self.grid.origin, self.grid.n, self.grid.resolution, coverage)
         self.planner = Planner(planner)
         self.state = RescueState.LISTEN
         self.events: list[RescueEvent] = []
@@ -406,6 +409,7 @@ class RescueBehaviour:
         self.motion.update_odometry(stationary=True)
         pose = self.pose
         assoc = self.map.update(res.evidence, pose, self.clock.now())
+        self.coverage.listened(pose[:2], self._machines())
         if self._evidence_at is None or math.hypot(*(pose[:2] - self._evidence_at[:2])) > DISTINCT_POSES_M \
                 or abs(wrap_angle(pose[2] - self._evidence_at[2])) > math.radians(5.0):
             self._evidence, self._evidence_at = [], pose.copy()
@@ -650,9 +654,7 @@ class RescueBehaviour:
             return
         self._silent = 0
         avoid = [s.position[:2] for s in self.map.sources if s.state is SourceState.FOUND]
-        machines = [s.position[:2] for s in self.map.sources
-                    if s.cls is SourceClass.INTERFERER and s.state is not SourceState.FOUND]
-        plan, how = self.planner.explore_goal(self.grid, self.pose, avoid, machines)
+        plan, how = self.planner.explore_goal(self.grid, self.pose, self.coverage, avoid, self._machines())
         if plan is None:
             self._emit(Decision.NO_TARGET, f"{why}; {how}")
             n = self.grid.forget()
@@ -668,6 +670,11 @@ class RescueBehaviour:
             return
         self.state = RescueState.EXPLORE
         self._follow(plan, RescueState.EXPLORE, Decision.EXPLORE, None, prefix=f"{why}: explore {how}")
+
+    def _machines(self) -> list[np.ndarray]:
+        """World (x, y) of the mapped interferers: their sound masks the callers near them."""
+        return [s.position[:2] for s in self.map.sources
+                if s.cls is SourceClass.INTERFERER and s.state is not SourceState.FOUND]
 
     def _release_target(self) -> None:
         try:
@@ -769,6 +776,8 @@ class RescueBehaviour:
 
     def _recover(self, b: Blocked, when: str) -> None:
         contact = self.grid.mark_contact(self.pose, b.heading, b.kind)
+        if b.kind == "bumper":
+            self.coverage.shadow(contact, b.heading, self.grid.config.contact_width_m)
         self.state = RescueState.RECOVER
         what = {"bumper": "bumper pressed", "stall": "wheels stalled", "slip": "wheels slipping (gyro)"}[b.kind]
         self._emit(Decision.RECOVER, f"{what} {when}: obstacle mapped at ({contact[0]:.2f}, {contact[1]:.2f}), "

@@ -31,7 +31,7 @@ import math
 import os
 import tempfile
 import time
-from dataclasses import asdict
+from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
 
@@ -193,8 +193,12 @@ class RescueRun:
         # The robot's microphone health monitor, as on the real robot (faults go to rerun and results).
         self.mic_health = MonitoredAudio(self.audio, MicHealth(cube8(), HealthConfig(fs=sc.localizer.fs)),
                                          localizer, on_change=self._on_mic_faults)
+        stages = sc.stage_configs()
+        if stages["coverage"].area is None:
+            # The search area, as a rescuer's floor plan gives it: the room's floor (world = odometry frame here).
+            stages["coverage"] = replace(stages["coverage"], area=(0.0, 0.0, *map(float, world.room.size[:2])))
         self.behaviour = RescueBehaviour(self.mic_health, self.drive, self.clock, self.localizer, sc.behaviour,
-                                         params=robot.params, start_pose=world.robot_start, **sc.stage_configs())
+                                         params=robot.params, start_pose=world.robot_start, **stages)
         self.paths = FreeSpacePaths(world)
         # truth bookkeeping
         self._obstacle_blocks = [not b.climbable for b in world.obstacles]

@@ -44,6 +44,7 @@ of the robot start in radians. Example (``scenarios/paper_lab.toml``)::
     [sound_map]              # robot.sound_map SoundMapConfig fields (array_height_m comes from [behaviour])
     [planner]                # robot.planner PlannerConfig fields
     [occupancy]              # robot.occupancy OccupancyConfig fields
+    [coverage]               # robot.coverage CoverageConfig fields (area: the room's floor unless given)
 
 Every error names the file and the field (``paper_lab.toml: victims[0].position: ...``).
 """
@@ -59,6 +60,7 @@ import numpy as np
 
 from robot.config_values import check_scalar, field_values
 from robot.motion import MotionConfig
+from robot.coverage import CoverageConfig
 from robot.occupancy import OccupancyConfig
 from robot.planner import PlannerConfig
 from robot.rescue import RescueConfig
@@ -157,12 +159,13 @@ class Scenario:
     sound_map: SoundMapConfig = field(default_factory=SoundMapConfig)
     planner: PlannerConfig = field(default_factory=PlannerConfig)
     occupancy: OccupancyConfig = field(default_factory=OccupancyConfig)
+    coverage: CoverageConfig = field(default_factory=CoverageConfig)
     path: str = ""
 
     def stage_configs(self) -> dict[str, Any]:
         """The behaviour's per-stage configs as ``RescueBehaviour`` keyword arguments."""
         return {"motion": self.motion, "sound_map": self.sound_map, "planner": self.planner,
-                "occupancy": self.occupancy}
+                "occupancy": self.occupancy, "coverage": self.coverage}
 
     # -- building the run's objects ---------------------------------------------------------
     def with_overrides(self, seed: int | None = None, time_limit_s: float | None = None) -> "Scenario":
@@ -343,7 +346,7 @@ def _resample(x: np.ndarray, fs_in: int, fs_out: int) -> np.ndarray:
 # ----------------------------------------------------------------------------- parsing
 _TOP_KEYS = {"name", "description", "seed", "time_limit_s", "success_radius_m", "scene", "robot", "victims",
              "interferers", "noise", "acoustics", "localizer", "behaviour", "motion", "sound_map", "planner",
-             "occupancy"}
+             "occupancy", "coverage"}
 
 
 def scenario_names() -> list[str]:
@@ -438,7 +441,7 @@ def parse_scenario(data: dict, base_dir: str | Path = ".", path: str = "") -> Sc
         raise err(f"behaviour.listen_s: {behaviour.listen_s} s is shorter than one localizer frame")
     stages = {key: _dataclass(cls, _table(data, key, where), key, where)
               for key, cls in (("motion", MotionConfig), ("sound_map", SoundMapConfig), ("planner", PlannerConfig),
-                               ("occupancy", OccupancyConfig))}
+                               ("occupancy", OccupancyConfig), ("coverage", CoverageConfig))}
     return Scenario(name=name, scene=scene, victims=victims, interferers=interferers,
                     description=_get(data, "description", str, where, default=""), seed=seed,
                     time_limit_s=time_limit, success_radius_m=radius, robot_start=start, noise=noise,

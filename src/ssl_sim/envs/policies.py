@@ -20,11 +20,12 @@ from dataclasses import dataclass, replace
 import numpy as np
 from gymnasium import spaces
 
+from robot.coverage import ListeningCoverage
 from robot.motion import MotionConfig
 from robot.occupancy import OccupancyConfig, OccupancyGrid
 from robot.odometry import wrap_angle
 from robot.planner import Planner, PlannerConfig
-from robot.sound_map import SoundMap, SoundMapConfig, SourceState
+from robot.sound_map import SoundMap, SoundMapConfig, SourceClass, SourceState
 from ssl_core.grid import direction_from_angles
 from ssl_sim.envs.config import EnvConfig
 from ssl_sim.envs.rescue_env import LEVEL_CEIL_DB, LEVEL_FLOOR_DB
@@ -95,6 +96,7 @@ class MapPlanningPolicy:
         self.time = 0.0
         self.map = SoundMap(self.sound_map_config)
         self.grid = OccupancyGrid(self.occupancy_config)
+        self.coverage = ListeningCoverage(self.grid.origin, self.grid.n, self.grid.resolution)
         self.planner = Planner(self.planner_config)
         self.target: int | None = None
         self.heading = 0.0            # world direction of the last commanded motion (rad)
@@ -113,13 +115,15 @@ class MapPlanningPolicy:
         evidence = [_Evidence(direction_from_angles(h.azimuth, h.elevation), self.time, h.level_db)
                     for h in decode_detections(obs)]
         self.map.update(evidence, self.pose, self.time)
+        machines = [s.position[:2] for s in self.map.sources if s.cls is SourceClass.INTERFERER]
+        self.coverage.listened(self.pose[:2], machines)
         src, plan, _ = self.planner.choose_target(self.map.sources, self.grid, self.pose, self.time, self.target)
         if src is not None:
             self.target = src.id
             self.map.set_state(src.id, SourceState.APPROACHING)
         else:
             avoid = [s.position[:2] for s in self.map.sources if s.state is SourceState.FOUND]
-            plan, _ = self.planner.explore_goal(self.grid, self.pose, avoid)
+            plan, _ = self.planner.explore_goal(self.grid, self.pose, self.coverage, avoid, machines)
         if plan is None:
             return np.zeros(3, np.float32)
         goal = plan.waypoints[0]
