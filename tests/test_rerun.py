@@ -115,3 +115,19 @@ def test_logger_targets_and_null_logger():
     assert not null.enabled
     null.listen(0.0, np.zeros(3), np.eye(3), [], [])  # no-ops
     null.close()
+
+
+def test_coverage_shows_the_floor_around_the_listens(recorded):
+    """The listening coverage drawn is floor within the hearing radius of a pose the robot listened from
+    (odometry = world frame here, within odometry drift), inside the room."""
+    run, result, chunks = recorded
+    _, cov = _component(chunks, "/world/coverage", "Points3D:positions")
+    assert cov, "no coverage logged"
+    pts = np.array(cov[-1])[:, :2]
+    poses = np.array([rec["pose"][:2] for rec in result["listens"]])
+    d = np.min(np.hypot(pts[:, None, 0] - poses[None, :, 0], pts[:, None, 1] - poses[None, :, 1]), axis=1)
+    r = run.behaviour.coverage.config.hearing_radius_m
+    assert np.all(d <= r + 0.2)                               # 0.1 m cells and a little drift
+    assert len(pts) >= 0.5 * np.pi * r * r / 0.01             # at least half a disc of 0.1 m cells
+    room = np.asarray(run.world.room.size[:2])
+    assert np.all((pts >= -0.05) & (pts <= room + 0.05))

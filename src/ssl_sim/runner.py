@@ -357,11 +357,15 @@ class RescueRun:
                 self.false_positives.append(entry)
 
     def _log_map(self) -> None:
-        """The behaviour's own picture: sound map, plan, learned obstacles (odometry frame = world frame here)."""
+        """The behaviour's own picture: sound map, plan, learned obstacles, listening coverage (odometry frame =
+        world frame here)."""
         b, t = self.behaviour, self.robot.time
         self.logger.sound_map(t, b.map.sources)
         self.logger.plan(t, b.pose[:2], None if b.plan is None else b.plan.waypoints)
         self.logger.obstacles(t, b.grid.obstacle_points(), b.grid.resolution)
+        heard = b.coverage.in_area & (b.coverage.unheard < 1.0)
+        ij = np.argwhere(heard)
+        self.logger.coverage(t, b.grid.centre(ij), b.coverage.unheard[heard])
 
     # -- main loop ------------------------------------------------------------------------
     def run(self, progress: bool = False, close_logger: bool = True) -> dict[str, Any]:

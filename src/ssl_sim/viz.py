@@ -20,6 +20,7 @@ Entities (world frame unless said otherwise; all lengths m)::
     world/mics               microphone world positions (Points3D)
     world/trail              the path driven (LineStrips3D)
     world/target             where the behaviour is heading (Arrows3D from the robot, world)
+    world/coverage           floor listened to, coloured by P(a caller there still unheard) (Points3D)
     plots/angular_error_deg, plots/distance_to_victim_m, plots/wheel_speed/{0,1,2} (Scalars)
     log/behaviour            the behaviour's decisions (TextLog); log/state its state
 """
@@ -92,6 +93,10 @@ class RunLogger:
 
     def obstacles(self, t: float, cells_world: np.ndarray, cell_size: float) -> None:
         """Obstacles learned by touch: centres (k, 2) of occupied grid cells of ``cell_size`` m."""
+
+    def coverage(self, t: float, cells_world: np.ndarray, unheard: np.ndarray) -> None:
+        """Floor listened to: centres (k, 2) of grid cells and the probability (k,) that a caller there is
+        still unheard (``robot.coverage``)."""
 
     def scalars(self, t: float, values: dict[str, float]) -> None:
         """Time series, e.g. ``{"angular_error_deg": 2.1}``."""
@@ -349,6 +354,18 @@ class RerunLogger(RunLogger):
                      self.rr.Boxes3D(centers=np.column_stack([c, np.full(len(c), 0.1)]),
                                      half_sizes=[[cell_size / 2, cell_size / 2, 0.1]] * len(c),
                                      colors=[(230, 120, 40, 160)], fill_mode=self.rr.components.FillMode.Solid))
+
+    def coverage(self, t, cells_world, unheard) -> None:
+        self._time(t)
+        c = np.asarray(cells_world, float).reshape(-1, 2)
+        if not len(c):
+            return
+        from matplotlib import colormaps
+
+        # Heard floor dark, still unheard floor light: where the robot has listened, and how well.
+        rgb = (colormaps["cividis"](np.clip(np.asarray(unheard, float), 0, 1))[:, :3] * 255).astype(np.uint8)
+        self.rec.log("world/coverage", self.rr.Points3D(np.column_stack([c, np.full(len(c), 0.005)]), radii=0.05,
+                                                        colors=rgb))
 
     def scalars(self, t, values: dict[str, float]) -> None:
         self._time(t)
