@@ -82,6 +82,20 @@ def test_target_prefers_victims_interferers_last_never_found_or_rejected():
     assert s is None and plan is None
 
 
+def test_a_voiceless_source_mapped_outside_the_search_area_is_no_target():
+    """A room from (-1, -1) to (4, 3): an unclassified source estimated 1 m beyond its east wall (a mirror image
+    in it) is not approached; inside the room it is, and so is one classified victim beyond the wall."""
+    g = OccupancyGrid()
+    room = (-1.0, -1.0, 4.0, 3.0)
+    image = _src(0, (5.0, 0.0), 0.42, SourceClass.UNKNOWN)
+    assert Planner().choose_target([image], g, (0.0, 0.0, 0.0), 12.0, area=room)[0] is None
+    assert Planner().choose_target([image], g, (0.0, 0.0, 0.0), 12.0)[0].id == 0              # no area known
+    inside = _src(1, (3.8, 0.0), 0.42, SourceClass.UNKNOWN)
+    assert Planner().choose_target([image, inside], g, (0.0, 0.0, 0.0), 12.0, area=room)[0].id == 1
+    voiced = _src(2, (5.0, 1.0), 0.9, SourceClass.VICTIM)
+    assert Planner().choose_target([image, voiced], g, (0.0, 0.0, 0.0), 12.0, area=room)[0].id == 2
+
+
 def test_current_target_kept_unless_clearly_better():
     g = OccupancyGrid()
     a = _src(0, (2.0, 0.0), 0.8, SourceClass.VICTIM)

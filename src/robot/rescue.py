@@ -383,7 +383,7 @@ class RescueBehaviour:
         if self._found_check(heard) or self.done:
             return
         src, plan, why = self.planner.choose_target(self.map.sources, self.grid, self.pose, self.clock.now(),
-                                                    self.target)
+                                                    self.target, self.coverage.config.area)
         if src is not None and self.config.require_voice and src.cls is not SourceClass.VICTIM:
             src, plan, why = None, None, f"require_voice: {why} is not classified victim"
         if src is None:
