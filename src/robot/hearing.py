@@ -61,6 +61,7 @@ from the prior after ~1 s.
 """
 from __future__ import annotations
 
+import copy
 import enum
 import math
 from dataclasses import dataclass
@@ -135,6 +136,8 @@ class HearingConfig:
                                         # block (dev rooms, 0.5 / 0.75 / 0.9: her track VOICE 88 / 90 / 90 %,
                                         # scan detections with the machine alone 11 / 2 / 0 in 112 s; measured
                                         # with the gate on any scan beam's frames)
+    scan_seed: bool = False   # TEMP
+    scan_owner: bool = False  # TEMP
     scan_power: float = 0.09       # the detection's ``power`` for the tracker: its measurement sigma
                                    # (TrackerConfig.measurement_sigma: 3.3 deg, about the error of the
                                    # interpolated peak) and a new-source posterior above theta_new (dev rooms:
@@ -301,7 +304,11 @@ class Hearing:
         n_speech = [int(np.count_nonzero(p >= SPEECH_THRESHOLD)) for p in probs]
         n_sure = [int(np.count_nonzero(p >= cfg.credit_probability)) for p in probs]   # what the owner's L gains
         talking = [j for j, n in enumerate(n_speech) if n]
-        owner = max(talking, key=lambda j: excess[j], default=None)
+        if cfg.scan_owner and len(self._scan_dirs):
+            at = self._scan_score_at(directions)
+            owner = max(talking, key=lambda j: (at[j], excess[j]), default=None)
+        else:
+            owner = max(talking, key=lambda j: excess[j], default=None)
         # each frame heard stands for the frames not heard beside it
         scale = self.vad.frame_s / self._heard_share(x.shape[-1])
         step_up, step_down = cfg.rise_per_s * scale, cfg.fall_per_s * scale
@@ -336,6 +343,19 @@ class Hearing:
         self._scan_detections = [Detection(az, 0.0, direction_from_angles(az, 0.0), cfg.scan_power,
                                            float(levels[j]))]
 
+    def _scan_index(self, directions: np.ndarray) -> np.ndarray:
+        """Fractional index of each direction's azimuth on the scan grid (-180 deg + i step)."""
+        az = np.arctan2(directions[:, 1], directions[:, 0])
+        return ((np.rad2deg(az) + 180.0) / self.config.scan_step_deg) % len(self._scan_dirs)
+
+    def _scan_score_at(self, directions: np.ndarray) -> np.ndarray:
+        """The scan's score interpolated (linearly, around the circle) at each direction's azimuth."""
+        f = self._scan_index(directions)
+        i = np.floor(f).astype(int)
+        w = f - i
+        s = self._scan_score
+        return (1 - w) * s[i % len(s)] + w * s[(i + 1) % len(s)]
+
     def voice_detections(self) -> list[Detection]:
         """The voice scan's detection since the last call (at most one; ``scan_step_deg`` > 0), for the
         tracker's next window: the direction on the horizon whose beam carries the most speech."""
@@ -349,7 +369,13 @@ class Hearing:
         """State of a new track id: its log-odds is that of the nearest known track within
         ``inherit_deg`` (a duplicate of a source already heard: the tracker starts new ids on one machine
         at other elevations, and from the prior they would be undecided until heard), else the prior 0."""
-        st = self._blank_state(memory)
+        if self.config.scan_seed and self._scan_states:
+            j = int(np.round(self._scan_index(direction[None])[0])) % len(self._scan_states)
+            src = self._scan_states[j]
+            st = self._blank_state(memory)
+            st.noise, st.slow_db = copy.deepcopy(src.noise), src.slow_db
+        else:
+            st = self._blank_state(memory)
         if self._dir and self.config.inherit_deg > 0:
             known = list(self._dir)
             cos = np.array([self._dir[k] for k in known]) @ direction
