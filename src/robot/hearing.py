@@ -61,7 +61,6 @@ from the prior after ~1 s.
 """
 from __future__ import annotations
 
-import copy
 import enum
 import math
 from dataclasses import dataclass
@@ -129,15 +128,15 @@ class HearingConfig:
     scan_step_deg: float = 0.0
     scan_memory_s: float = 1.0     # listening time (s) the scan's score is averaged over (0.5 / 2 s: the same
                                    # on the dev rooms)
-    scan_settle_s: float = 2.0     # listening time (s) before the scan's first detection: its score is broad
-                                   # while the MPDR covariance fills (dev rooms: 1 s let early detections 25
-                                   # deg off her start tracks that owned her speech; her track VOICE 84 -> 90 %)
     scan_min_probability: float = 0.75  # a detection needs a frame at this VAD probability in its beam in the
                                         # block (dev rooms, 0.5 / 0.75 / 0.9: her track VOICE 88 / 90 / 90 %,
                                         # scan detections with the machine alone 11 / 2 / 0 in 112 s; measured
                                         # with the gate on any scan beam's frames)
-    scan_seed: bool = False   # TEMP
-    scan_owner: bool = False  # TEMP
+    scan_settle_s: float = 0.5     # listening time (s) before the scan's first detection: until the MPDR's first
+                                   # refresh (beam_update_s) its inverse is the first block's 6 frames and the
+                                   # scan's peak is off (free field, tests/test_hearing.py: 10 deg at 0.2 s). With
+                                   # the scan's owner rule, dev rooms, her track VOICE at 0 / 0.25 / 0.5 / 1 / 1.5
+                                   # / 2 s: 96 / 96 / 94 / 91 / 91 / 91 % (docs/hearing.md, "The voice scan's map")
     scan_power: float = 0.09       # the detection's ``power`` for the tracker: its measurement sigma
                                    # (TrackerConfig.measurement_sigma: 3.3 deg, about the error of the
                                    # interpolated peak) and a new-source posterior above theta_new (dev rooms:
@@ -146,10 +145,10 @@ class HearingConfig:
     def __post_init__(self) -> None:
         if not 0 <= self.scan_step_deg <= 90:
             raise ValueError(f"HearingConfig.scan_step_deg: expected 0 (off) .. 90 deg, got {self.scan_step_deg}")
-        if not self.scan_memory_s > 0:
-            raise ValueError(f"HearingConfig.scan_memory_s: expected > 0 s, got {self.scan_memory_s}")
         if not self.scan_settle_s >= 0:
             raise ValueError(f"HearingConfig.scan_settle_s: expected >= 0 s, got {self.scan_settle_s}")
+        if not self.scan_memory_s > 0:
+            raise ValueError(f"HearingConfig.scan_memory_s: expected > 0 s, got {self.scan_memory_s}")
         if not SPEECH_THRESHOLD <= self.scan_min_probability <= 1:
             raise ValueError(f"HearingConfig.scan_min_probability: expected {SPEECH_THRESHOLD}..1, "
                              f"got {self.scan_min_probability}")
@@ -304,9 +303,9 @@ class Hearing:
         n_speech = [int(np.count_nonzero(p >= SPEECH_THRESHOLD)) for p in probs]
         n_sure = [int(np.count_nonzero(p >= cfg.credit_probability)) for p in probs]   # what the owner's L gains
         talking = [j for j, n in enumerate(n_speech) if n]
-        if cfg.scan_owner and len(self._scan_dirs):
-            at = self._scan_score_at(directions)
-            owner = max(talking, key=lambda j: (at[j], excess[j]), default=None)
+        if len(self._scan_dirs):   # with the voice scan: the talking beam whose azimuth carries the most speech
+            voice_map = self._scan_score_at(directions)
+            owner = max(talking, key=lambda j: (voice_map[j], excess[j]), default=None)
         else:
             owner = max(talking, key=lambda j: excess[j], default=None)
         # each frame heard stands for the frames not heard beside it
@@ -343,18 +342,14 @@ class Hearing:
         self._scan_detections = [Detection(az, 0.0, direction_from_angles(az, 0.0), cfg.scan_power,
                                            float(levels[j]))]
 
-    def _scan_index(self, directions: np.ndarray) -> np.ndarray:
-        """Fractional index of each direction's azimuth on the scan grid (-180 deg + i step)."""
-        az = np.arctan2(directions[:, 1], directions[:, 0])
-        return ((np.rad2deg(az) + 180.0) / self.config.scan_step_deg) % len(self._scan_dirs)
-
     def _scan_score_at(self, directions: np.ndarray) -> np.ndarray:
-        """The scan's score interpolated (linearly, around the circle) at each direction's azimuth."""
-        f = self._scan_index(directions)
+        """The scan's score (its map of speech: VAD probability x denoised power, over ``scan_memory_s``) at
+        each direction's azimuth (array frame, (k, 3)), interpolated linearly between grid neighbours."""
+        az = np.rad2deg(np.arctan2(directions[:, 1], directions[:, 0]))
+        f = ((az + 180.0) / self.config.scan_step_deg) % len(self._scan_dirs)   # grid: -180 deg + i step
         i = np.floor(f).astype(int)
-        w = f - i
         s = self._scan_score
-        return (1 - w) * s[i % len(s)] + w * s[(i + 1) % len(s)]
+        return (1 - (f - i)) * s[i % len(s)] + (f - i) * s[(i + 1) % len(s)]
 
     def voice_detections(self) -> list[Detection]:
         """The voice scan's detection since the last call (at most one; ``scan_step_deg`` > 0), for the
@@ -369,13 +364,7 @@ class Hearing:
         """State of a new track id: its log-odds is that of the nearest known track within
         ``inherit_deg`` (a duplicate of a source already heard: the tracker starts new ids on one machine
         at other elevations, and from the prior they would be undecided until heard), else the prior 0."""
-        if self.config.scan_seed and self._scan_states:
-            j = int(np.round(self._scan_index(direction[None])[0])) % len(self._scan_states)
-            src = self._scan_states[j]
-            st = self._blank_state(memory)
-            st.noise, st.slow_db = copy.deepcopy(src.noise), src.slow_db
-        else:
-            st = self._blank_state(memory)
+        st = self._blank_state(memory)
         if self._dir and self.config.inherit_deg > 0:
             known = list(self._dir)
             cos = np.array([self._dir[k] for k in known]) @ direction
