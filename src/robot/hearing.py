@@ -27,18 +27,22 @@ speech frames in beams at -50 dB re full scale).
 Voice scan (``HearingConfig.scan_step_deg`` > 0, off by default): beams every 15 deg (say) of azimuth on
 the horizon are heard with the tracks' (same STFT, MPDR, suppression, one VAD batch); the direction whose
 beam carries the most speech (mean VAD probability x denoised beam power, averaged over ``scan_memory_s``
-of listening) is a ``Detection`` for the tracker (``voice_detections``) whenever a scan beam hears speech.
-A talker beside a machine 6 dB louder is rarely a peak of the SRP-PHAT map, but her voice is heard in
-the MPDR beams that cancel the machine, most strongly in hers (docs/hearing.md, "The voice scan": in the test rooms
-her track then exists in 86 % of her talking seconds instead of 66 %). Cost: +0.39 ms CPU per second of
-audio per scan beam (24 beams at 15 deg: +9.4 ms).
+of listening) is a ``Detection`` for the tracker (``voice_detections``) whenever a scan beam hears speech,
+from ``scan_settle_s`` (0.5 s) of listening on. A talker beside a machine 6 dB louder is rarely a peak of the
+SRP-PHAT map, but her voice is heard in the MPDR beams that cancel the machine, most strongly in hers
+(docs/hearing.md, "The voice scan" and "The voice scan's map": in the test rooms her track then exists in 94 %
+of her talking seconds instead of 66 %). The same score is the owner rule's map when the scan is on (below).
+Cost: +0.39 ms CPU per second of audio per scan beam (24 beams at 15 deg: +9.4 ms).
 
 The filter (log-odds L of "this source is a human voice", prior L = 0, i.e. P = 0.5):
   * each 32 ms VAD frame of a track adds ``rise_per_s`` x 0.032 if the frame is speech (VAD probability
     >= 0.5); each non-speech frame of a SOUNDING track (activity >= ``min_activity``) subtracts
     ``fall_per_s`` x 0.032;
     speech heard in several beams in the same block counts only for the beam with the largest share
-    of its power above its noise floor (the talker's own; a talker leaking into a machine's beam), and
+    of its power above its noise floor (the talker's own; a talker leaking into a machine's beam) or,
+    with the voice scan on, for the track whose azimuth has the largest scan score (the excess does not
+    tell her beam from a leak: in the test rooms the machine's beam and a ghost's owned her speech by it,
+    while the scan's score peaked at her; docs/hearing.md, "The voice scan's map"), and
     of that beam's speech frames only those at VAD probability >= ``credit_probability`` (0.75) raise
     L: speech leaking into a machine's beam is marginal (on the dev rooms 37-48 % of such frames reach
     0.75, 87-89 % of a talker's own), and where her track is missing her beam cannot compete for it;
