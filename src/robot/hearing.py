@@ -132,15 +132,15 @@ class HearingConfig:
     scan_step_deg: float = 0.0
     scan_memory_s: float = 1.0     # listening time (s) the scan's score is averaged over (0.5 / 2 s: the same
                                    # on the dev rooms)
-    scan_min_probability: float = 0.75  # a detection needs a frame at this VAD probability in its beam in the
-                                        # block (dev rooms, 0.5 / 0.75 / 0.9: her track VOICE 88 / 90 / 90 %,
-                                        # scan detections with the machine alone 11 / 2 / 0 in 112 s; measured
-                                        # with the gate on any scan beam's frames)
     scan_settle_s: float = 0.5     # listening time (s) before the scan's first detection: until the MPDR's first
                                    # refresh (beam_update_s) its inverse is the first block's 6 frames and the
                                    # scan's peak is off (free field, tests/test_hearing.py: 10 deg at 0.2 s). With
                                    # the scan's owner rule, dev rooms, her track VOICE at 0 / 0.25 / 0.5 / 1 / 1.5
                                    # / 2 s: 96 / 96 / 94 / 91 / 91 / 91 % (docs/hearing.md, "The voice scan's map")
+    scan_min_probability: float = 0.75  # a detection needs a frame at this VAD probability in its beam in the
+                                        # block (dev rooms, 0.5 / 0.75 / 0.9: her track VOICE 88 / 90 / 90 %,
+                                        # scan detections with the machine alone 11 / 2 / 0 in 112 s; measured
+                                        # with the gate on any scan beam's frames)
     scan_power: float = 0.09       # the detection's ``power`` for the tracker: its measurement sigma
                                    # (TrackerConfig.measurement_sigma: 3.3 deg, about the error of the
                                    # interpolated peak) and a new-source posterior above theta_new (dev rooms:
@@ -149,10 +149,10 @@ class HearingConfig:
     def __post_init__(self) -> None:
         if not 0 <= self.scan_step_deg <= 90:
             raise ValueError(f"HearingConfig.scan_step_deg: expected 0 (off) .. 90 deg, got {self.scan_step_deg}")
-        if not self.scan_settle_s >= 0:
-            raise ValueError(f"HearingConfig.scan_settle_s: expected >= 0 s, got {self.scan_settle_s}")
         if not self.scan_memory_s > 0:
             raise ValueError(f"HearingConfig.scan_memory_s: expected > 0 s, got {self.scan_memory_s}")
+        if not self.scan_settle_s >= 0:
+            raise ValueError(f"HearingConfig.scan_settle_s: expected >= 0 s, got {self.scan_settle_s}")
         if not SPEECH_THRESHOLD <= self.scan_min_probability <= 1:
             raise ValueError(f"HearingConfig.scan_min_probability: expected {SPEECH_THRESHOLD}..1, "
                              f"got {self.scan_min_probability}")
