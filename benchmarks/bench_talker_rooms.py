@@ -14,6 +14,8 @@ machines, other azimuths, robot position and simulation seed). For each localize
 With ``--hear scan_step_deg=15`` the hearing's voice scan feeds its detections to the tracker (as in
 tests/test_hearing.py); its columns: her talking seconds with a scan detection within 10 deg of her, scan
 detections more than 20 deg from her, and scan detections with the machine alone (a third run per room).
+False alarms: scored seconds with a VOICE track more than 20 deg from her at -6 dB, and with any VOICE track
+when the machine is alone.
 "From 6 s": her track VOICE in her talking seconds from the 6th on (the steady state).
 
 Prints a table per room and pooled, and one JSON line. ``--quick``: localizer columns only (no VAD);
@@ -125,6 +127,10 @@ def run(case, sir_db, rooms, cfg: LocalizerConfig, hear: bool, with_talker: bool
         out["scan_her"] = [any(s == sec and d <= 10 for s, d in scan)
                            for sec in range(SETTLE_S, SECONDS) if talks[sec]]
         out["scan_off"] = [d > 20 for _, d in scan]
+        # false alarms: scored seconds with a VOICE track more than 20 deg from her (with the machine alone:
+        # any VOICE track, she is silent)
+        out["voice_off"] = [any(classify(e) is VoiceClass.VOICE and (_deg(e.direction, u_her) > 20 or not with_talker)
+                                for e in ev) for ev, _ in scored]
     return out
 
 
@@ -133,7 +139,8 @@ def _row(name: str, r: dict) -> str:
         return f"{100 * np.mean(r[k]):.0f}" if len(r[k]) else "-"
     return (f"| {name} | {pct('det6')} / {pct('det0')} | {pct('mdet6')} | {pct('ghost6')} / {pct('ghost0')} | "
             f"{pct('htrack')} | {pct('voice')} | {pct('mtrack')} | {pct('nonvoice')} | {pct('near')} | "
-            f"{pct('scan6')} / {pct('scan0')} | {pct('scanoff6')} | {len(r['scanalone'])} | {pct('voicelate')} |")
+            f"{pct('scan6')} / {pct('scan0')} | {pct('scanoff6')} | {len(r['scanalone'])} | {pct('voicelate')} | "
+            f"{pct('voiceoff6')} / {pct('voicealone')} |")
 
 
 def main() -> None:
@@ -155,8 +162,9 @@ def main() -> None:
     print(f"rooms={args.rooms} overrides={over} hearing={hear_over}")
     print("| room | her det -6 / 0 dB | machine det -6 | ghost -6 / 0 dB | her track -6 | her VOICE -6 | "
           "machine track -6 | machine NON_VOICE -6 | VOICE within 10 deg, 0 dB | voice scan on her -6 / 0 dB | "
-          "scan detections off her -6 | scan detections, machine alone | her VOICE -6, from 6 s |")
-    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|")
+          "scan detections off her -6 | scan detections, machine alone | her VOICE -6, from 6 s | "
+          "VOICE track > 20 deg from her -6 / machine alone |")
+    print("|---|---|---|---|---|---|---|---|---|---|---|---|---|---|")
     for case in cases:
         a = run(case, -6.0, args.rooms, cfg, not args.quick, hearing_config=hcfg)
         b = run(case, 0.0, args.rooms, cfg, not args.quick, hearing_config=hcfg)
@@ -165,7 +173,8 @@ def main() -> None:
                "ghost0": b["ghost"], "htrack": a.get("her_track", []), "voice": a.get("voice", []),
                "mtrack": a.get("m_track", []), "nonvoice": a.get("nonvoice", []), "near": b.get("near", []),
                "scan6": a.get("scan_her", []), "scan0": b.get("scan_her", []), "scanoff6": a.get("scan_off", []),
-               "scanalone": c.get("scan_off", []), "voicelate": a.get("voice_late", [])}
+               "scanalone": c.get("scan_off", []), "voicelate": a.get("voice_late", []),
+               "voiceoff6": a.get("voice_off", []), "voicealone": c.get("voice_off", [])}
         for k, v in row.items():
             pooled.setdefault(k, []).extend(v)
         print(_row(str(case), row), flush=True)

@@ -27,18 +27,22 @@ speech frames in beams at -50 dB re full scale).
 Voice scan (``HearingConfig.scan_step_deg`` > 0, off by default): beams every 15 deg (say) of azimuth on
 the horizon are heard with the tracks' (same STFT, MPDR, suppression, one VAD batch); the direction whose
 beam carries the most speech (mean VAD probability x denoised beam power, averaged over ``scan_memory_s``
-of listening) is a ``Detection`` for the tracker (``voice_detections``) whenever a scan beam hears speech.
-A talker beside a machine 6 dB louder is rarely a peak of the SRP-PHAT map, but her voice is heard in
-the MPDR beams that cancel the machine, most strongly in hers (docs/hearing.md, "The voice scan": in the test rooms
-her track then exists in 86 % of her talking seconds instead of 66 %). Cost: +0.39 ms CPU per second of
-audio per scan beam (24 beams at 15 deg: +9.4 ms).
+of listening) is a ``Detection`` for the tracker (``voice_detections``) whenever a scan beam hears speech,
+from ``scan_settle_s`` (0.5 s) of listening on. A talker beside a machine 6 dB louder is rarely a peak of the
+SRP-PHAT map, but her voice is heard in the MPDR beams that cancel the machine, most strongly in hers
+(docs/hearing.md, "The voice scan" and "The voice scan's map": in the test rooms her track then exists in 94 %
+of her talking seconds instead of 66 %). The same score is the owner rule's map when the scan is on (below).
+Cost: +0.39 ms CPU per second of audio per scan beam (24 beams at 15 deg: +9.4 ms).
 
 The filter (log-odds L of "this source is a human voice", prior L = 0, i.e. P = 0.5):
   * each 32 ms VAD frame of a track adds ``rise_per_s`` x 0.032 if the frame is speech (VAD probability
     >= 0.5); each non-speech frame of a SOUNDING track (activity >= ``min_activity``) subtracts
     ``fall_per_s`` x 0.032;
     speech heard in several beams in the same block counts only for the beam with the largest share
-    of its power above its noise floor (the talker's own; a talker leaking into a machine's beam), and
+    of its power above its noise floor (the talker's own; a talker leaking into a machine's beam) or,
+    with the voice scan on, for the track whose azimuth has the largest scan score (the excess does not
+    tell her beam from a leak: in the test rooms the machine's beam and a ghost's owned her speech by it,
+    while the scan's score peaked at her; docs/hearing.md, "The voice scan's map"), and
     of that beam's speech frames only those at VAD probability >= ``credit_probability`` (0.75) raise
     L: speech leaking into a machine's beam is marginal (on the dev rooms 37-48 % of such frames reach
     0.75, 87-89 % of a talker's own), and where her track is missing her beam cannot compete for it;
@@ -128,9 +132,11 @@ class HearingConfig:
     scan_step_deg: float = 0.0
     scan_memory_s: float = 1.0     # listening time (s) the scan's score is averaged over (0.5 / 2 s: the same
                                    # on the dev rooms)
-    scan_settle_s: float = 2.0     # listening time (s) before the scan's first detection: its score is broad
-                                   # while the MPDR covariance fills (dev rooms: 1 s let early detections 25
-                                   # deg off her start tracks that owned her speech; her track VOICE 84 -> 90 %)
+    scan_settle_s: float = 0.5     # listening time (s) before the scan's first detection: until the MPDR's first
+                                   # refresh (beam_update_s) its inverse is the first block's 6 frames and the
+                                   # scan's peak is off (free field, tests/test_hearing.py: 10 deg at 0.2 s). With
+                                   # the scan's owner rule, dev rooms, her track VOICE at 0 / 0.25 / 0.5 / 1 / 1.5
+                                   # / 2 s: 96 / 96 / 94 / 91 / 91 / 91 % (docs/hearing.md, "The voice scan's map")
     scan_min_probability: float = 0.75  # a detection needs a frame at this VAD probability in its beam in the
                                         # block (dev rooms, 0.5 / 0.75 / 0.9: her track VOICE 88 / 90 / 90 %,
                                         # scan detections with the machine alone 11 / 2 / 0 in 112 s; measured
@@ -301,7 +307,11 @@ class Hearing:
         n_speech = [int(np.count_nonzero(p >= SPEECH_THRESHOLD)) for p in probs]
         n_sure = [int(np.count_nonzero(p >= cfg.credit_probability)) for p in probs]   # what the owner's L gains
         talking = [j for j, n in enumerate(n_speech) if n]
-        owner = max(talking, key=lambda j: excess[j], default=None)
+        if len(self._scan_dirs):   # with the voice scan: the talking beam whose azimuth carries the most speech
+            voice_map = self._scan_score_at(directions)
+            owner = max(talking, key=lambda j: (voice_map[j], excess[j]), default=None)
+        else:
+            owner = max(talking, key=lambda j: excess[j], default=None)
         # each frame heard stands for the frames not heard beside it
         scale = self.vad.frame_s / self._heard_share(x.shape[-1])
         step_up, step_down = cfg.rise_per_s * scale, cfg.fall_per_s * scale
@@ -335,6 +345,15 @@ class Hearing:
         az = math.remainder(math.radians(-180.0 + (j + offset) * cfg.scan_step_deg), 2 * math.pi)
         self._scan_detections = [Detection(az, 0.0, direction_from_angles(az, 0.0), cfg.scan_power,
                                            float(levels[j]))]
+
+    def _scan_score_at(self, directions: np.ndarray) -> np.ndarray:
+        """The scan's score (its map of speech: VAD probability x denoised power, over ``scan_memory_s``) at
+        each direction's azimuth (array frame, (k, 3)), interpolated linearly between grid neighbours."""
+        az = np.rad2deg(np.arctan2(directions[:, 1], directions[:, 0]))
+        f = ((az + 180.0) / self.config.scan_step_deg) % len(self._scan_dirs)   # grid: -180 deg + i step
+        i = np.floor(f).astype(int)
+        s = self._scan_score
+        return (1 - (f - i)) * s[i % len(s)] + (f - i) * s[(i + 1) % len(s)]
 
     def voice_detections(self) -> list[Detection]:
         """The voice scan's detection since the last call (at most one; ``scan_step_deg`` > 0), for the
