@@ -69,3 +69,21 @@ def test_the_search_area_bounds_the_unheard_floor_and_exploration():
     assert plan is not None, why
     goal = plan.waypoints[-1]
     assert goal[0] < -0.9 and abs(goal[1]) < 1.0, why
+
+
+def test_no_exploration_goal_when_all_reachable_floor_is_heard():
+    """A 3.4 m square room walled in by bumper contacts, listened to from its centre until nothing within the
+    hearing radius is unheard: no goal is worth driving to (the behaviour then forgets single contacts and
+    looks again), instead of stepping to and fro between goals worth nothing."""
+    from robot.planner import Planner
+    g, cov = _coverage(CoverageConfig(area=(-1.7, -1.7, 1.7, 1.7)))
+    for t in np.arange(-1.7, 1.71, 0.1):
+        for p, h in (((t, 1.7 - 0.17), math.pi / 2), ((t, -1.7 + 0.17), -math.pi / 2),
+                     ((1.7 - 0.17, t), 0.0), ((-1.7 + 0.17, t), math.pi)):
+            g.mark_contact(p, h, "bumper")
+    for _ in range(12):
+        for p in ((0.0, 0.0), (0.8, 0.8), (-0.8, 0.8), (0.8, -0.8), (-0.8, -0.8)):
+            cov.listened(p)
+    assert cov.unheard[cov.in_area].max() < 1e-3
+    plan, why = Planner().explore_goal(g, (0.0, 0.0, 0.0), cov)
+    assert plan is None, why

@@ -326,7 +326,10 @@ class Planner:
         # The ring's best against the best unvisited cell anywhere, each worth its score over (1 + path length /
         # distance_scale_m) as a target is: in a pocket of rubble whose floor is covered the ring offers only
         # visited floor (measured, dense_pump: the robot circled its start for 100-250 s), the way out leads on.
-        if best is not None and (far is None or self._worth(best[0], best[1].length) >= far[1]):
+        # A ring goal worth nothing (heard floor, learned obstacles) is no goal: with no frontier either, the
+        # behaviour's clearing recovery must look again (measured, dense_pump seed 4: 80 s stepping to and fro
+        # between two such goals inside a ring of misplaced contacts beside the pump).
+        if best is not None and best[0] > 0 and (far is None or self._worth(best[0], best[1].length) >= far[1]):
             self._frontier = None
             return best[1], f"toward unheard floor at {best[2]:.0f} deg (world), {best[0]:.2f} unheard/away score"
         if far is None:
