@@ -8,7 +8,9 @@ Frames: world/odometry frame (x, y in m). Inputs are the ``SoundMap``'s sources 
   12: never approach a non-voice source while a voice source exists), to check them from close up, where
   the behaviour rejects them for good if still no voice is heard.
   Utility = P(victim) x exp(-age / ``recency_s``) / (1 + path length / ``distance_scale_m``)
-  / (1 + 1-sigma / ``sigma_scale_m``) (a single bearing's guess counts less than a triangulated source), the current
+  / (1 + 1-sigma / ``sigma_scale_m``) (a single bearing's guess counts less than a triangulated source) x its
+  coherence (mean SRP-PHAT peak power of its bearings, ``weigh_coherence``: a mirror image is half as coherent as
+  the caller's direct sound), the current
   target's utility times ``keep_factor`` (no dithering between two callers: measured, the reactive behaviour
   made 21 turns between two intermittent callers on light_rubble_three seed 6). A source never heard with speech
   beside a mapped interferer, or heard along its line, is taken for that machine's image and not approached
@@ -69,11 +71,26 @@ class PlannerConfig:
     distance_scale_m: float = 3.0      # path length that halves a target's utility
     keep_factor: float = 1.5           # the current target's (and frontier goal's) utility is multiplied by this
     sigma_scale_m: float = 0.5         # position uncertainty (1 sigma) that halves a target's utility
+    # Utility x the source's coherence (``MapSource.coherence``, mean normalised SRP-PHAT peak power of its inlier
+    # bearings; a source without any counts 1). A mirror image in a wall and sound that came around rubble arrive
+    # weaker and more diffuse than direct sound: light rubble seeds 0-15 (main 65e500e), detections within 10 deg
+    # of a sounding caller had median power 0.121, the others 0.064; from the start corner the far caller's image
+    # in the wall behind the robot (power 0.04-0.065 against her direct 0.07-0.12) drew the first leg into that wall.
+    weigh_coherence: bool = False
+    # Sources heard as direct sound first: while the pool holds a source whose coherence reaches this, sources below
+    # it are not targets (0: off). The found criteria's ``found_min_power`` (RescueConfig, 0.075): callers' bearings
+    # within reach have >= 0.10 (5th percentile), wrong ones 0.07 (median); here the start corner's mirror images of
+    # the far caller had 0.04-0.066 against her direct 0.064-0.20.
+    direct_power: float = 0.0
     stale_s: float = 45.0              # a source not classified victim and unheard this long is no target
     max_sigma_m: float = 20.0          # not a target while more uncertain (a bearing above the horizon: no range)
     probe_sigma_m: float = 1.0         # more uncertain than this: drive probe_distance_m along its bearing
     probe_distance_m: float = 1.5
     probe_angle_deg: float = 30.0      # ... that far off the bearing (a baseline for triangulation)
+    # ... on the clockwise side when its path is shorter: the counter-clockwise goal lies beyond a wall met before.
+    # From the light-rubble start corner the far caller's probe goal lay outside the room, beyond the wall along
+    # which the robot then bumped its way (seeds 10, 15 on main 65e500e: 3 contacts in 20 s, then it turned away).
+    probe_either_side: bool = False
     min_listens: int = 2               # an interferer is checked once heard this often (not a stray reflection)
     stop_radius_m: float = 0.35        # plan to within this of a source's estimate
     unreachable_retry_s: float = 60.0  # a target without a path (or that bumps too often) is skipped this long
@@ -105,6 +122,7 @@ class PlannerConfig:
         need(self, self.max_sigma_m > 0, "max_sigma_m", "> 0 m")
         need(self, self.probe_sigma_m > 0 and self.probe_distance_m > 0, "probe_sigma_m", "> 0 m (and probe_distance_m)")
         need(self, self.stale_s > 0, "stale_s", "> 0 s")
+        need(self, 0 <= self.direct_power < 1, "direct_power", "in [0, 1)")
         need(self, self.min_listens >= 1, "min_listens", "an integer >= 1")
         need(self, self.stop_radius_m >= 0, "stop_radius_m", ">= 0 m")
         need(self, self.unreachable_retry_s >= 0, "unreachable_retry_s", ">= 0 s")
@@ -194,20 +212,37 @@ class Planner:
         return not np.any(blocked[ij[ok, 0], ij[ok, 1]])
 
     # -- targets --------------------------------------------------------------------------
-    def goal_of(self, s: MapSource, pose) -> np.ndarray:
+    def goal_of(self, s: MapSource, pose, side: float = 1.0) -> np.ndarray:
         """Where to drive for a source: its estimate, or, while its range is unknown (1-sigma over
         ``probe_sigma_m``: heard from one place, near the horizon), ``probe_distance_m`` toward it but
-        ``probe_angle_deg`` off its bearing (closer, and across the bearing so that the next ones triangulate)."""
+        ``probe_angle_deg`` off its bearing (closer, and across the bearing so that the next ones triangulate),
+        counter-clockwise (``side`` +1) or clockwise (-1)."""
         cfg = self.config
         xy = np.asarray(pose[:2], float)
         v = s.position[:2] - xy
         d = float(np.hypot(*v))
-        if s.horizontal_sigma_m <= cfg.probe_sigma_m or d < 1e-9:
+        if not self.probing(s, pose):
             return s.position[:2].copy()
         # 30 deg off the bearing: closer, and across it, so that the next bearings cross this one.
-        a = math.atan2(v[1], v[0]) + math.radians(cfg.probe_angle_deg)
+        a = math.atan2(v[1], v[0]) + side * math.radians(cfg.probe_angle_deg)
         step = min(d, cfg.probe_distance_m)
         return xy + step * np.array([math.cos(a), math.sin(a)])
+
+    def probing(self, s: MapSource, pose) -> bool:
+        """The source's range is unknown (1-sigma over ``probe_sigma_m``): it is approached by a probe."""
+        return s.horizontal_sigma_m > self.config.probe_sigma_m \
+            and math.hypot(s.position[0] - pose[0], s.position[1] - pose[1]) >= 1e-9
+
+    def _plan_to(self, s: MapSource, grid: OccupancyGrid, pose, search) -> Plan | None:
+        """The path toward a source (``goal_of``). A probe goes on the counter-clockwise side unless
+        ``probe_either_side`` and the clockwise side's path is shorter by more than ``grid.resolution`` (the
+        counter-clockwise goal lies beyond obstacles learned by touch: a wall beside the robot)."""
+        plan = self.plan(grid, pose[:2], self.goal_of(s, pose), _search=search)
+        if self.config.probe_either_side and self.probing(s, pose):
+            other = self.plan(grid, pose[:2], self.goal_of(s, pose, -1.0), _search=search)
+            if other is not None and (plan is None or other.length < plan.length - grid.resolution):
+                return other
+        return plan
 
     def mark_unreachable(self, source_id: int, time: float) -> None:
         self._unreachable[source_id] = time
@@ -233,19 +268,25 @@ class Planner:
                        and not self.machine_image(s, checked)]
         # Interferers only when nothing else is mapped: reached, they are rejected (a victim whose voice the
         # VAD missed from afar is heard from close up).
-        pool = victims or unknown or interferers
+        # Heard as direct sound first, a victim before an unclassified source: a mirror image is heard with the
+        # caller's voice (often more clearly than her, apart from the other callers), but weak and diffuse.
+        direct = [[s for s in group if s.coherence is None or s.coherence >= cfg.direct_power]
+                  for group in (victims, unknown)]
+        pool = direct[0] or direct[1] or victims or unknown or interferers
         n_int = len(interferers) if pool is not interferers else 0
         if not pool:
             return None, None, "no unfound source mapped"
         search = self.distances(grid, pose[:2])
         best = None
         for s in pool:
-            plan = self.plan(grid, pose[:2], self.goal_of(s, pose), _search=search)
+            plan = self._plan_to(s, grid, pose, search)
             if plan is None:
                 self.mark_unreachable(s.id, time)
                 continue
             u = s.victim_probability * math.exp(-max(time - s.last_time, 0.0) / cfg.recency_s) \
                 / (1.0 + plan.length / cfg.distance_scale_m) / (1.0 + s.horizontal_sigma_m / cfg.sigma_scale_m)
+            if cfg.weigh_coherence and s.coherence is not None:
+                u *= s.coherence
             if s.id == current:
                 u *= cfg.keep_factor
             if best is None or u > best[0]:
