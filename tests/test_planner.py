@@ -186,35 +186,33 @@ def test_machine_image_needs_no_voice_and_the_machine_near_or_on_its_bearings():
     assert pl.machine_image(near, [pump])                         # 1.2 m from it
 
 
-def test_a_mirror_image_loses_to_the_direct_sound_by_its_coherence():
+def test_a_mirror_image_is_no_target_while_a_source_heard_as_direct_sound_is_mapped():
     # At the start, 0.5 m from a wall at x = 0 that it has not touched yet: a caller 4 m ahead at (4.5, 0) and her
     # mirror image in the wall at (-4.5, 0), heard straight behind. From one pose both are bearings of unknown range
-    # (probes, equally far); the image happened to be heard with speech more often (P(victim) 0.97 against 0.9), but
-    # its SRP-PHAT peaks are half as strong (README: 0.064 against 0.121, median). Weighed by coherence the caller is
-    # chosen; unweighed the image, i.e. into the wall.
+    # (probes, equally far). The image happened to be heard with speech (a victim) while she was not yet (unknown),
+    # but its SRP-PHAT peaks are half as strong as hers (README: 0.064 against 0.121, median): with direct_power the
+    # caller heard as direct sound is the target; without it the victim class wins, i.e. into the wall.
     g = OccupancyGrid(OccupancyConfig(size_m=12.0), origin=(0.0, 0.0))
     robot = (0.5, 0.0, 0.0)
 
-    def heard(i, toward, p_victim, power):
+    def heard(i, toward, p_victim, cls, power):
         origin = (robot[0], robot[1], 0.3)
         along = np.array(toward, float) - origin
         along /= np.linalg.norm(along)
         rays = tuple(Listen(float(k), origin, tuple(along), None, 0.9, -52.0, 1.0, power) for k in range(3))
         pos = np.array(origin) + 3.0 * along                   # the along-ray guess, range 1-sigma 3 m
         cov = 9.0 * np.outer(along, along) + 0.01 * np.eye(3)
-        return MapSource(i, pos, cov, p_victim, SourceClass.VICTIM, SourceState.UNVISITED, 3, 3, 0.0, 3.0, -52.0,
-                         -52.0, rays, coherence=power)
+        return MapSource(i, pos, cov, p_victim, cls, SourceState.UNVISITED, 3, 3, 0.0, 3.0, -52.0, -52.0, rays,
+                         coherence=power)
 
-    caller, image = heard(0, (4.5, 0.0, 0.1), 0.9, 0.12), heard(1, (-4.5, 0.0, 0.1), 0.97, 0.06)
-    weighed = Planner(PlannerConfig(weigh_coherence=True, direct_power=0.0))
-    s, plan, _ = weighed.choose_target([image, caller], g, robot, 3.0)
+    caller = heard(0, (4.5, 0.0, 0.1), 0.42, SourceClass.UNKNOWN, 0.12)
+    image = heard(1, (-4.5, 0.0, 0.1), 0.9, SourceClass.VICTIM, 0.06)
+    s, plan, _ = Planner(PlannerConfig(direct_power=0.075)).choose_target([image, caller], g, robot, 3.0)
     assert s.id == 0 and plan.waypoints[-1][0] > robot[0] + 1.0   # toward the caller, away from the wall
-    plain = Planner(PlannerConfig(weigh_coherence=False, direct_power=0.0))
-    s, plan, _ = plain.choose_target([caller, image], g, robot, 3.0)
-    assert s.id == 1 and plan.waypoints[-1][0] < 0.0              # unweighed: the image, beyond the wall
-    # Direct sound first (a source whose bearings reach direct_power before one whose bearings do not), unweighed:
-    # the caller, even when the image is a victim and she is not yet classified.
-    first = Planner(PlannerConfig(weigh_coherence=False, direct_power=0.075))
-    unsure = dataclasses.replace(caller, victim_probability=0.42, cls=SourceClass.UNKNOWN)
-    assert first.choose_target([image, unsure], g, robot, 3.0)[0].id == 0
-    assert plain.choose_target([image, unsure], g, robot, 3.0)[0].id == 1
+    s, plan, _ = Planner(PlannerConfig(direct_power=0.0)).choose_target([caller, image], g, robot, 3.0)
+    assert s.id == 1 and plan.waypoints[-1][0] < 0.0              # without: the image, beyond the wall
+    # Nothing heard as direct sound: the weak sources are still targets (a caller heard only around a partition).
+    faint = dataclasses.replace(caller, coherence=0.05)
+    assert Planner(PlannerConfig(direct_power=0.075)).choose_target([faint], g, robot, 3.0)[0].id == 0
+    with pytest.raises(ValueError, match="direct_power"):
+        PlannerConfig(direct_power=1.5)

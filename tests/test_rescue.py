@@ -410,6 +410,8 @@ def test_config_errors_name_the_field():
         RescueConfig(found_distance_m=0.0)
     with pytest.raises(ValueError, match="max_victims"):
         RescueConfig(max_victims=0)
+    with pytest.raises(ValueError, match="RescueConfig.start_listens"):
+        RescueConfig(start_listens=0)
     w = World([])
     with pytest.raises(ValueError, match="geometry: 8 microphones but the audio source has 4"):
         make(w, audio=FakeAudio(w.clock, n_channels=4), geometry=cube8())

@@ -149,7 +149,8 @@ def test_faint_silent_listens_do_not_make_a_caller_an_interferer():
 def test_coherence_is_the_mean_power_of_the_inlier_bearings():
     # A caller at (2.5, 1, 0.1) heard from four poses along x with SRP peak powers 0.10-0.16; one listen's bearing
     # toward her is 15 deg off (a reflection off rubble beside her; power 0.9, so that counting it would show): it
-    # joins her (within the association gate) but is no inlier (> inlier_deg), so not in her coherence. Evidence without a power (a tracker's) leaves it unknown.
+    # joins her (within the association gate) but is no inlier (> inlier_deg), so not in her coherence. Evidence
+    # without a power (a tracker's) leaves it unknown.
     p = np.array([2.5, 1.0, 0.1])
     m, powers = SoundMap(), [0.10, 0.12, 0.14, 0.16]
     for k, pw in enumerate(powers):

@@ -6,11 +6,11 @@ Frames: world/odometry frame (x, y in m). Inputs are the ``SoundMap``'s sources 
 * **target** (``choose_target``): unfound sources classified victim; while none is, unknown sources (not yet
   classified: a caller who has not called long enough); interferers only when nothing else is mapped (issue
   12: never approach a non-voice source while a voice source exists), to check them from close up, where
-  the behaviour rejects them for good if still no voice is heard.
+  the behaviour rejects them for good if still no voice is heard. With ``direct_power``, victims and then unknown
+  sources heard as direct sound (``MapSource.coherence`` at least that) come before all others: a mirror image
+  carries the caller's voice but arrives weak and diffuse.
   Utility = P(victim) x exp(-age / ``recency_s``) / (1 + path length / ``distance_scale_m``)
-  / (1 + 1-sigma / ``sigma_scale_m``) (a single bearing's guess counts less than a triangulated source) x its
-  coherence (mean SRP-PHAT peak power of its bearings, ``weigh_coherence``: a mirror image is half as coherent as
-  the caller's direct sound), the current
+  / (1 + 1-sigma / ``sigma_scale_m``) (a single bearing's guess counts less than a triangulated source), the current
   target's utility times ``keep_factor`` (no dithering between two callers: measured, the reactive behaviour
   made 21 turns between two intermittent callers on light_rubble_three seed 6). A source never heard with speech
   beside a mapped interferer, or heard along its line, is taken for that machine's image and not approached
@@ -71,12 +71,6 @@ class PlannerConfig:
     distance_scale_m: float = 3.0      # path length that halves a target's utility
     keep_factor: float = 1.5           # the current target's (and frontier goal's) utility is multiplied by this
     sigma_scale_m: float = 0.5         # position uncertainty (1 sigma) that halves a target's utility
-    # Utility x the source's coherence (``MapSource.coherence``, mean normalised SRP-PHAT peak power of its inlier
-    # bearings; a source without any counts 1). A mirror image in a wall and sound that came around rubble arrive
-    # weaker and more diffuse than direct sound: light rubble seeds 0-15 (main 65e500e), detections within 10 deg
-    # of a sounding caller had median power 0.121, the others 0.064; from the start corner the far caller's image
-    # in the wall behind the robot (power 0.04-0.065 against her direct 0.07-0.12) drew the first leg into that wall.
-    weigh_coherence: bool = False
     # Sources heard as direct sound first: while the pool holds a source whose coherence reaches this, sources below
     # it are not targets (0: off). The found criteria's ``found_min_power`` (RescueConfig, 0.075): callers' bearings
     # within reach have >= 0.10 (5th percentile), wrong ones 0.07 (median); here the start corner's mirror images of
@@ -87,10 +81,6 @@ class PlannerConfig:
     probe_sigma_m: float = 1.0         # more uncertain than this: drive probe_distance_m along its bearing
     probe_distance_m: float = 1.5
     probe_angle_deg: float = 30.0      # ... that far off the bearing (a baseline for triangulation)
-    # ... on the clockwise side when its path is shorter: the counter-clockwise goal lies beyond a wall met before.
-    # From the light-rubble start corner the far caller's probe goal lay outside the room, beyond the wall along
-    # which the robot then bumped its way (seeds 10, 15 on main 65e500e: 3 contacts in 20 s, then it turned away).
-    probe_either_side: bool = False
     min_listens: int = 2               # an interferer is checked once heard this often (not a stray reflection)
     stop_radius_m: float = 0.35        # plan to within this of a source's estimate
     unreachable_retry_s: float = 60.0  # a target without a path (or that bumps too often) is skipped this long
@@ -212,37 +202,20 @@ class Planner:
         return not np.any(blocked[ij[ok, 0], ij[ok, 1]])
 
     # -- targets --------------------------------------------------------------------------
-    def goal_of(self, s: MapSource, pose, side: float = 1.0) -> np.ndarray:
+    def goal_of(self, s: MapSource, pose) -> np.ndarray:
         """Where to drive for a source: its estimate, or, while its range is unknown (1-sigma over
         ``probe_sigma_m``: heard from one place, near the horizon), ``probe_distance_m`` toward it but
-        ``probe_angle_deg`` off its bearing (closer, and across the bearing so that the next ones triangulate),
-        counter-clockwise (``side`` +1) or clockwise (-1)."""
+        ``probe_angle_deg`` off its bearing (closer, and across the bearing so that the next ones triangulate)."""
         cfg = self.config
         xy = np.asarray(pose[:2], float)
         v = s.position[:2] - xy
         d = float(np.hypot(*v))
-        if not self.probing(s, pose):
+        if s.horizontal_sigma_m <= cfg.probe_sigma_m or d < 1e-9:
             return s.position[:2].copy()
         # 30 deg off the bearing: closer, and across it, so that the next bearings cross this one.
-        a = math.atan2(v[1], v[0]) + side * math.radians(cfg.probe_angle_deg)
+        a = math.atan2(v[1], v[0]) + math.radians(cfg.probe_angle_deg)
         step = min(d, cfg.probe_distance_m)
         return xy + step * np.array([math.cos(a), math.sin(a)])
-
-    def probing(self, s: MapSource, pose) -> bool:
-        """The source's range is unknown (1-sigma over ``probe_sigma_m``): it is approached by a probe."""
-        return s.horizontal_sigma_m > self.config.probe_sigma_m \
-            and math.hypot(s.position[0] - pose[0], s.position[1] - pose[1]) >= 1e-9
-
-    def _plan_to(self, s: MapSource, grid: OccupancyGrid, pose, search) -> Plan | None:
-        """The path toward a source (``goal_of``). A probe goes on the counter-clockwise side unless
-        ``probe_either_side`` and the clockwise side's path is shorter by more than ``grid.resolution`` (the
-        counter-clockwise goal lies beyond obstacles learned by touch: a wall beside the robot)."""
-        plan = self.plan(grid, pose[:2], self.goal_of(s, pose), _search=search)
-        if self.config.probe_either_side and self.probing(s, pose):
-            other = self.plan(grid, pose[:2], self.goal_of(s, pose, -1.0), _search=search)
-            if other is not None and (plan is None or other.length < plan.length - grid.resolution):
-                return other
-        return plan
 
     def mark_unreachable(self, source_id: int, time: float) -> None:
         self._unreachable[source_id] = time
@@ -279,14 +252,12 @@ class Planner:
         search = self.distances(grid, pose[:2])
         best = None
         for s in pool:
-            plan = self._plan_to(s, grid, pose, search)
+            plan = self.plan(grid, pose[:2], self.goal_of(s, pose), _search=search)
             if plan is None:
                 self.mark_unreachable(s.id, time)
                 continue
             u = s.victim_probability * math.exp(-max(time - s.last_time, 0.0) / cfg.recency_s) \
                 / (1.0 + plan.length / cfg.distance_scale_m) / (1.0 + s.horizontal_sigma_m / cfg.sigma_scale_m)
-            if cfg.weigh_coherence and s.coherence is not None:
-                u *= s.coherence
             if s.id == current:
                 u *= cfg.keep_factor
             if best is None or u > best[0]:

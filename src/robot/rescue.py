@@ -234,8 +234,8 @@ class RescueConfig:
         if not (isinstance(self.fatal_faults, tuple) and set(self.fatal_faults) <= set(FAULT_NAMES.values())):
             raise ValueError(f"RescueConfig.fatal_faults: expected drive fault names out of "
                              f"{sorted(FAULT_NAMES.values())} (an empty list for none), got {self.fatal_faults!r}")
-        for name in ("explore_after_silent", "start_listens", "max_contacts_per_target", "max_baseline_steps", "reject_after_listens",
-                     "refute_after_listens", "escape_rounds"):
+        for name in ("explore_after_silent", "start_listens", "max_contacts_per_target", "max_baseline_steps",
+                     "reject_after_listens", "refute_after_listens", "escape_rounds"):
             if getattr(self, name) < 1:
                 raise ValueError(f"RescueConfig.{name}: expected an integer >= 1, got {getattr(self, name)}")
         if self.max_victims is not None and self.max_victims < 1:
