@@ -7,7 +7,7 @@ import pytest
 
 from robot.occupancy import OccupancyConfig, OccupancyGrid
 from robot.planner import Planner, PlannerConfig
-from robot.sound_map import Listen, MapSource, SourceClass, SourceState
+from robot.sound_map import MapSource, SourceClass, SourceState
 
 
 def _wall_grid():
@@ -184,35 +184,3 @@ def test_machine_image_needs_no_voice_and_the_machine_near_or_on_its_bearings():
     assert not pl.machine_image(aside, [pump])                    # 3.6 m from it, heard 90 deg off its bearing
     near = dataclasses.replace(aside, position=np.array([3.0, 1.2, 0.1]))
     assert pl.machine_image(near, [pump])                         # 1.2 m from it
-
-
-def test_a_mirror_image_is_no_target_while_a_source_heard_as_direct_sound_is_mapped():
-    # At the start, 0.5 m from a wall at x = 0 that it has not touched yet: a caller 4 m ahead at (4.5, 0) and her
-    # mirror image in the wall at (-4.5, 0), heard straight behind. From one pose both are bearings of unknown range
-    # (probes, equally far). The image happened to be heard with speech (a victim) while she was not yet (unknown),
-    # but its SRP-PHAT peaks are half as strong as hers (README: 0.064 against 0.121, median): with direct_power the
-    # caller heard as direct sound is the target; without it the victim class wins, i.e. into the wall.
-    g = OccupancyGrid(OccupancyConfig(size_m=12.0), origin=(0.0, 0.0))
-    robot = (0.5, 0.0, 0.0)
-
-    def heard(i, toward, p_victim, cls, power):
-        origin = (robot[0], robot[1], 0.3)
-        along = np.array(toward, float) - origin
-        along /= np.linalg.norm(along)
-        rays = tuple(Listen(float(k), origin, tuple(along), None, 0.9, -52.0, 1.0, power) for k in range(3))
-        pos = np.array(origin) + 3.0 * along                   # the along-ray guess, range 1-sigma 3 m
-        cov = 9.0 * np.outer(along, along) + 0.01 * np.eye(3)
-        return MapSource(i, pos, cov, p_victim, cls, SourceState.UNVISITED, 3, 3, 0.0, 3.0, -52.0, -52.0, rays,
-                         coherence=power)
-
-    caller = heard(0, (4.5, 0.0, 0.1), 0.42, SourceClass.UNKNOWN, 0.12)
-    image = heard(1, (-4.5, 0.0, 0.1), 0.9, SourceClass.VICTIM, 0.06)
-    s, plan, _ = Planner(PlannerConfig(direct_power=0.075)).choose_target([image, caller], g, robot, 3.0)
-    assert s.id == 0 and plan.waypoints[-1][0] > robot[0] + 1.0   # toward the caller, away from the wall
-    s, plan, _ = Planner(PlannerConfig(direct_power=0.0)).choose_target([caller, image], g, robot, 3.0)
-    assert s.id == 1 and plan.waypoints[-1][0] < 0.0              # without: the image, beyond the wall
-    # Nothing heard as direct sound: the weak sources are still targets (a caller heard only around a partition).
-    faint = dataclasses.replace(caller, coherence=0.05)
-    assert Planner(PlannerConfig(direct_power=0.075)).choose_target([faint], g, robot, 3.0)[0].id == 0
-    with pytest.raises(ValueError, match="direct_power"):
-        PlannerConfig(direct_power=1.5)

@@ -20,7 +20,6 @@ class _Ev:
         v = np.asarray(toward, float) - [origin[0], origin[1], H]
         self.direction = v / np.linalg.norm(v)
         self.track_id, self.time, self.voice_probability, self.level_db, self.activity = None, 0.0, voice, -40.0, 1.0
-        self.power = None
 
 
 def test_restart_from_keeps_only_the_listens_heard_there():

@@ -1,5 +1,4 @@
 """World-frame sound map: bearings from a drive past static sources, checked against the geometry put in."""
-import math
 from dataclasses import dataclass
 
 import numpy as np
@@ -20,7 +19,6 @@ class Ev:
     voice_probability: float
     level_db: float = -30.0
     activity: float = 1.0
-    power: float | None = None
 
 
 def _drive_past(rng, outlier_fraction=0.1, noise_deg=3.0, track_ids=True):
@@ -144,24 +142,3 @@ def test_faint_silent_listens_do_not_make_a_caller_an_interferer():
     assert m2.sources[0].cls is SourceClass.UNKNOWN
     with pytest.raises(ValueError, match="silent_faint_db"):
         SoundMapConfig(silent_faint_db=-40.0)
-
-
-def test_coherence_is_the_mean_power_of_the_inlier_bearings():
-    # A caller at (2.5, 1, 0.1) heard from four poses along x with SRP peak powers 0.10-0.16; one listen's bearing
-    # toward her is 15 deg off (a reflection off rubble beside her; power 0.9, so that counting it would show): it
-    # joins her (within the association gate) but is no inlier (> inlier_deg), so not in her coherence. Evidence
-    # without a power (a tracker's) leaves it unknown.
-    p = np.array([2.5, 1.0, 0.1])
-    m, powers = SoundMap(), [0.10, 0.12, 0.14, 0.16]
-    for k, pw in enumerate(powers):
-        v = p - [0.8 * k, 0.0, H]
-        m.update([Ev(None, v / np.linalg.norm(v), float(k), 0.9, power=pw)], (0.8 * k, 0.0, 0.0), float(k))
-    a = math.atan2(1.0, 2.5 - 1.2) + math.radians(15)
-    m.update([Ev(None, np.array([math.cos(a), math.sin(a), 0.0]), 4.0, 0.9, power=0.9)], (1.2, 0.0, 0.0), 4.0)
-    s = _closest(m, p)
-    assert np.linalg.norm(s.position[:2] - p[:2]) < 0.3 and s.n_listens == 5 and s.n_inliers == 4
-    assert s.coherence == pytest.approx(np.mean(powers))
-    m2 = SoundMap()
-    v = p - [0.0, 0.0, H]
-    m2.update([Ev(0, v / np.linalg.norm(v), 0.0, 0.9)], (0.0, 0.0, 0.0), 0.0)
-    assert m2.sources[0].coherence is None

@@ -87,7 +87,6 @@ class TrackEvidence:
     voice_probability: float       # accumulated per-track P(voice) (0..1); a pause keeps it
     level_db: float                # beam level toward the track below 4 kHz (dB re full-scale sine), last listened block
     activity: float                # the track's activity
-    power: float | None = None     # SRP-PHAT peak power (``robot.sound_map.BearingEvidence``): a track has none
 
 
 @dataclass(frozen=True)

@@ -6,9 +6,7 @@ Frames: world/odometry frame (x, y in m). Inputs are the ``SoundMap``'s sources 
 * **target** (``choose_target``): unfound sources classified victim; while none is, unknown sources (not yet
   classified: a caller who has not called long enough); interferers only when nothing else is mapped (issue
   12: never approach a non-voice source while a voice source exists), to check them from close up, where
-  the behaviour rejects them for good if still no voice is heard. With ``direct_power``, victims and then unknown
-  sources heard as direct sound (``MapSource.coherence`` at least that) come before all others: a mirror image
-  carries the caller's voice but arrives weak and diffuse.
+  the behaviour rejects them for good if still no voice is heard.
   Utility = P(victim) x exp(-age / ``recency_s``) / (1 + path length / ``distance_scale_m``)
   / (1 + 1-sigma / ``sigma_scale_m``) (a single bearing's guess counts less than a triangulated source), the current
   target's utility times ``keep_factor`` (no dithering between two callers: measured, the reactive behaviour
@@ -71,11 +69,6 @@ class PlannerConfig:
     distance_scale_m: float = 3.0      # path length that halves a target's utility
     keep_factor: float = 1.5           # the current target's (and frontier goal's) utility is multiplied by this
     sigma_scale_m: float = 0.5         # position uncertainty (1 sigma) that halves a target's utility
-    # Sources heard as direct sound first: while the pool holds a source whose coherence reaches this, sources below
-    # it are not targets (0: off). The found criteria's ``found_min_power`` (RescueConfig, 0.075): callers' bearings
-    # within reach have >= 0.10 (5th percentile), wrong ones 0.07 (median); here the start corner's mirror images of
-    # the far caller had 0.04-0.066 against her direct 0.064-0.20.
-    direct_power: float = 0.0
     stale_s: float = 45.0              # a source not classified victim and unheard this long is no target
     max_sigma_m: float = 20.0          # not a target while more uncertain (a bearing above the horizon: no range)
     probe_sigma_m: float = 1.0         # more uncertain than this: drive probe_distance_m along its bearing
@@ -112,7 +105,6 @@ class PlannerConfig:
         need(self, self.max_sigma_m > 0, "max_sigma_m", "> 0 m")
         need(self, self.probe_sigma_m > 0 and self.probe_distance_m > 0, "probe_sigma_m", "> 0 m (and probe_distance_m)")
         need(self, self.stale_s > 0, "stale_s", "> 0 s")
-        need(self, 0 <= self.direct_power < 1, "direct_power", "in [0, 1)")
         need(self, self.min_listens >= 1, "min_listens", "an integer >= 1")
         need(self, self.stop_radius_m >= 0, "stop_radius_m", ">= 0 m")
         need(self, self.unreachable_retry_s >= 0, "unreachable_retry_s", ">= 0 s")
@@ -241,11 +233,7 @@ class Planner:
                        and not self.machine_image(s, checked)]
         # Interferers only when nothing else is mapped: reached, they are rejected (a victim whose voice the
         # VAD missed from afar is heard from close up).
-        # Heard as direct sound first, a victim before an unclassified source: a mirror image is heard with the
-        # caller's voice (often more clearly than her, apart from the other callers), but weak and diffuse.
-        direct = [[s for s in group if s.coherence is None or s.coherence >= cfg.direct_power]
-                  for group in (victims, unknown)]
-        pool = direct[0] or direct[1] or victims or unknown or interferers
+        pool = victims or unknown or interferers
         n_int = len(interferers) if pool is not interferers else 0
         if not pool:
             return None, None, "no unfound source mapped"

@@ -203,11 +203,6 @@ class RescueConfig:
     #                                        measured, light rubble seed 0 ended "stuck" on a 15 mm debris plate)
     baseline_step_m: float = 0.4           # sideways step to triangulate a source known along one line only
     explore_after_silent: int = 3          # silent listens with nothing mapped before exploring
-    start_listens: int = 1                 # listens at the start before the first move: standing costs time, not
-    #                                        path. Callers call intermittently (~40 % of 1 s listens): one listen
-    #                                        leaves a caller unheard or heard without speech (then "unknown", and the
-    #                                        planner takes any source classified victim first, a mirror image too),
-    #                                        and gives each source one power for the planner's coherence weight
     escape_rounds: int = 2                 # rounds of eight escape moves before "stuck" (see _escape)
     fatal_faults: tuple[str, ...] = ("encoder_error",)  # drive faults that end the mission
 
@@ -234,8 +229,8 @@ class RescueConfig:
         if not (isinstance(self.fatal_faults, tuple) and set(self.fatal_faults) <= set(FAULT_NAMES.values())):
             raise ValueError(f"RescueConfig.fatal_faults: expected drive fault names out of "
                              f"{sorted(FAULT_NAMES.values())} (an empty list for none), got {self.fatal_faults!r}")
-        for name in ("explore_after_silent", "start_listens", "max_contacts_per_target", "max_baseline_steps",
-                     "reject_after_listens", "refute_after_listens", "escape_rounds"):
+        for name in ("explore_after_silent", "max_contacts_per_target", "max_baseline_steps", "reject_after_listens",
+                     "refute_after_listens", "escape_rounds"):
             if getattr(self, name) < 1:
                 raise ValueError(f"RescueConfig.{name}: expected an integer >= 1, got {getattr(self, name)}")
         if self.max_victims is not None and self.max_victims < 1:
@@ -319,7 +314,6 @@ class RescueBehaviour:
         self._faults_seen: tuple[str, ...] = ()
         self._step_events: list[RescueEvent] = []
         self._odo_started = False
-        self._listens = 0                         # listens made so far
 
     # -- public API ---------------------------------------------------------------
     @property
@@ -385,10 +379,6 @@ class RescueBehaviour:
         heard = self._listen()
         if self._found_check(heard) or self.done:
             return
-        if self._listens < self.config.start_listens:
-            self._emit(Decision.NO_TARGET, f"listen {self._listens} of {self.config.start_listens} at the start "
-                                           "before the first move")
-            return
         src, plan, why = self.planner.choose_target(self.map.sources, self.grid, self.pose, self.clock.now(),
                                                     self.target)
         if src is not None and self.config.require_voice and src.cls is not SourceClass.VICTIM:
@@ -414,7 +404,6 @@ class RescueBehaviour:
         self.motion.stand(cfg.settle_s)          # settling: odometry tracks the braking, then learns the gyro bias
         res = self.listener.listen(cfg.listen_s, 0.0, cfg.min_power)
         self.motion.update_odometry(stationary=True)
-        self._listens += 1
         pose = self.pose
         assoc = self.map.update(res.evidence, pose, self.clock.now())
         if self._evidence_at is None or math.hypot(*(pose[:2] - self._evidence_at[:2])) > DISTINCT_POSES_M \

@@ -62,8 +62,6 @@ class BearingEvidence(Protocol):
     voice_probability: float       # 0..1
     level_db: float                # beam level toward it (dB re full-scale sine)
     activity: float                # 0..1
-    power: float | None            # normalised SRP-PHAT peak power of the detection (0..1); None: not known (a
-    #                                tracker's smoothed direction has none)
 
 
 class SourceClass(str, Enum):
@@ -147,7 +145,6 @@ class Listen:
     voice_probability: float
     level_db: float
     activity: float
-    power: float | None = None     # normalised SRP-PHAT peak power (0..1); None: not known
 
 
 @dataclass(frozen=True)
@@ -171,12 +168,6 @@ class MapSource:
     baseline_m: float = 0.0        # largest horizontal distance between two listening poses of its inliers
     crossing_deg: float = 0.0      # largest crossing angle of two inlier bearings from different poses
     min_crossing_deg: float = 15.0  # the map's min_pair_angle_deg
-    # Mean normalised SRP-PHAT peak power of its inlier listens that have one (None: none has): how much of its
-    # sound arrives as one plane wave. A mirror image (off a wall or rubble) or sound that came around an obstacle
-    # arrives weaker and more diffuse than a caller's direct sound: over the light-rubble listens of seeds 0-15
-    # (main 65e500e) detections within 10 deg of a sounding caller had power 0.121 (median; quartiles 0.101-0.149),
-    # the others 0.064 (0.056-0.086).
-    coherence: float | None = None
 
     @property
     def triangulated(self) -> bool:
@@ -457,7 +448,7 @@ class SoundMap:
         for ev, d in sorted(rays, key=lambda r: -float(r[0].activity)):
             sid = self._associate(ev, origin, d, taken)
             listen = Listen(float(time), tuple(origin), tuple(d), ev.track_id, float(ev.voice_probability),
-                            float(ev.level_db), float(ev.activity), None if ev.power is None else float(ev.power))
+                            float(ev.level_db), float(ev.activity))
             if sid is None:
                 src = _Source(self._next_id)
                 self._next_id += 1
@@ -664,9 +655,7 @@ class SoundMap:
             cls = SourceClass.UNKNOWN
         times = [r.time for r in s.rays]
         baseline = _baseline(inl)
-        powers = [r.power for r in inl if r.power is not None]
         return MapSource(s.id, s.position.copy(), s.covariance.copy(), pv, cls, s.state, len(s.rays), len(inl),
                          min(times, default=s.found_time or 0.0), max(times, default=s.found_time or 0.0),
                          s.rays[-1].level_db if s.rays else -math.inf, s.max_level_db, tuple(s.rays), s.found_time,
-                         baseline, _crossing_deg(inl), cfg.min_pair_angle_deg,
-                         float(np.mean(powers)) if powers else None)
+                         baseline, _crossing_deg(inl), cfg.min_pair_angle_deg)

@@ -110,7 +110,7 @@ class MapPlanningPolicy:
             self.grid.mark_contact(self.pose, self.heading, "bump")
             return self._twist(self.heading + math.pi, 0.6)
         self.grid.mark_free(self.pose[:2])
-        evidence = [_Evidence(direction_from_angles(h.azimuth, h.elevation), self.time, h.level_db, h.power)
+        evidence = [_Evidence(direction_from_angles(h.azimuth, h.elevation), self.time, h.level_db)
                     for h in decode_detections(obs)]
         self.map.update(evidence, self.pose, self.time)
         src, plan, _ = self.planner.choose_target(self.map.sources, self.grid, self.pose, self.time, self.target)
@@ -143,7 +143,6 @@ class _Evidence:
     direction: np.ndarray
     time: float
     level_db: float
-    power: float                   # normalised SRP-PHAT peak power of the detection
     track_id: int | None = None
     voice_probability: float = 0.5
     activity: float = 1.0
