@@ -112,15 +112,14 @@ def main() -> None:
     a, b = (int(v) for v in args.seeds.split(":"))
     base = _load(args.base, args.scenario, range(a, b))
     if not base:
-        raise SystemExit(f"bench_first_leg: error: base: no {args.scenario}_<seed>.json for seeds {a}-{b - 1} "
-                         f"in {args.base}")
+        ap.error(f"base: no {args.scenario}_<seed>.json for seeds {a}-{b - 1} in {args.base}")
     result = {"bench": "first_leg", "scenario": args.scenario, "seeds": [a, b],
               "base": _summary(str(args.base), base)}
     if args.new is not None:
         new = _load(args.new, args.scenario, range(a, b))
         seeds = sorted(set(base) & set(new))
         if not seeds:
-            raise SystemExit(f"bench_first_leg: error: new: no run of seeds {a}-{b - 1} in {args.new}")
+            ap.error(f"new: no {args.scenario}_<seed>.json of a seed in {args.base} in {args.new}")
         result["new"] = _summary(str(args.new), {s: new[s] for s in seeds})
         d = np.array([new[s]["spl"] - base[s]["spl"] for s in seeds])
         f = np.array([_legs(new[s])[0]["spl"] if _legs(new[s]) else 0.0 for s in seeds]) \
