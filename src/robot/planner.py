@@ -297,8 +297,8 @@ class Planner:
     def explore_goal(self, grid: OccupancyGrid, pose, coverage: ListeningCoverage, avoid: Sequence[np.ndarray] = (),
                      machines: Sequence[np.ndarray] = ()) -> tuple[Plan | None, str]:
         """A reachable point ``explore_distance_m`` away where a listen would hear most of the floor not yet
-        listened to (``coverage``), away from the points ``avoid`` (found victims) and, more so, from
-        ``machines`` (mapped interferers, world x, y)."""
+        listened to (``coverage``; ``machines``, the mapped interferers' world x, y, mask the goals near them),
+        away from the points ``avoid`` (found victims), or the best frontier goal (module docstring)."""
         cfg = self.config
         x, y = float(pose[0]), float(pose[1])
         search = self.distances(grid, (x, y))

@@ -24,7 +24,8 @@ One cycle walks the data path, each stage in its own module:
   ones that placed it there: the source is re-estimated from them alone, once;
 * **plan** (``robot.planner``): the most useful unfound victim (P(victim), recency, path length; interferers
   never) and a path to it around the obstacles learned by touch (``robot.occupancy``); none mapped ->
-  explore toward unvisited floor, away from found victims and interferers (after ``explore_after_silent``
+  explore where a listen would hear most of the floor not yet heard (``robot.coverage``: listens so far, a
+  mapped machine's masking, the search area), away from found victims (after ``explore_after_silent``
   silent listens when nothing is mapped, at once when only interferers are);
 * **move** (``robot.motion``): translate (the base is holonomic, the array omnidirectional: no turning) at
   most ``step_m`` along the path, then listen again. A contact (bumper, stall, gyro-detected slip) is
