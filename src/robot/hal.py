@@ -83,6 +83,9 @@ class DriveStatus:
     yaw_rate: float | None = None  # rad/s about the robot's +z (CCW positive) from a gyro, the mean over the
     #                                drive's last completed gyro window (50 ms); its residual bias is the odometry's
     #                                to learn (robot.odometry); None: no gyro
+    ranges: tuple[float, ...] | None = None  # m, one per sensor of ``robot.ranging.RangeLayout``: from the sensor
+    #                                along its ray to the first surface, inf when nothing is within its maximum
+    #                                range; None: no range sensors
 
     @property
     def ok(self) -> bool:
