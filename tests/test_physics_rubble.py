@@ -154,8 +154,10 @@ def test_hal_backends_drive_the_simulated_robot():
         odo = drive.odometry()
         assert isinstance(odo, WheelOdometry) and odo.timestamp == pytest.approx(1.0)
         assert robot.pose().x > 1.2
-        st = drive.status()  # driving straight: no bumper, no fault, and the gyro sees (almost) no turn
-        assert replace(st, yaw_rate=None) == DriveStatus() and abs(st.yaw_rate) < 0.05
+        st = drive.status()  # driving straight: no bumper, no fault, the gyro sees (almost) no turn, every wall
+        #                      is > 1 m away (beyond the range sensors' 0.8 m)
+        assert replace(st, yaw_rate=None, ranges=None) == DriveStatus() and abs(st.yaw_rate) < 0.05
+        assert st.ranges == (np.inf,) * 8
         clock.sleep(6.5)  # into the +x wall
         st = drive.status()
         assert st.bumper and not st.ok

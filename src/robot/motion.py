@@ -4,7 +4,9 @@ Frames: headings are in the ROBOT frame at the start of the move (rad, CCW from 
 poses in the odometry frame. Every primitive stops the drive when it ends; a bumper press, a stall (the
 drive's own flag, or too little odometry progress for the command: ``StallWatch``), wheel slip that the
 gyro exposes (``Odometry.slipping`` for ``slip_intervals`` readings in a row) or a fatal fault raise
-``Blocked`` with the drive status, after stopping.
+``Blocked`` with the drive status, after stopping. A translation asked to (``stop_for_ranges``) also stops
+before an obstacle its range sensors see in its way (``Blocked("range")``): a return inside the corridor the
+bumper sweeps, within ``range_stop_m`` ahead of it.
 """
 from __future__ import annotations
 
@@ -12,8 +14,11 @@ import math
 from dataclasses import dataclass, fields
 from typing import Callable
 
+import numpy as np
+
 from robot.hal import Clock, DriveBase, DriveStatus
 from robot.odometry import Odometry
+from robot.ranging import RangeLayout
 
 __all__ = ["MotionConfig", "Blocked", "Motion", "StallWatch"]
 
@@ -32,6 +37,9 @@ class MotionConfig:
     stall_progress_ratio: float = 0.2      # ... below this fraction of the commanded motion = stalled
     slip_intervals: int = 4                # gyro-detected slip this many readings in a row (0.2 s) = blocked
     motion_timeout_factor: float = 3.0     # a move may take this many times its nominal duration
+    range_stop_m: float = 0.12             # a range return this close ahead of the bumper stops a move (a control
+    #                                        tick at 0.25 m/s is 0.0125 m; the rest is margin for braking)
+    body_radius_m: float = 0.16            # the bumper ring (the corridor a translation sweeps is this wide each side)
 
     def __post_init__(self) -> None:
         for f in fields(self):
@@ -41,7 +49,7 @@ class MotionConfig:
 
 
 class Blocked(Exception):
-    """A move ended early: ``kind`` is "bumper", "stall", "slip" or "fault"; ``heading`` the direction of
+    """A move ended early: ``kind`` is "bumper", "stall", "slip", "range" or "fault"; ``heading`` the direction of
     the attempted motion in the odometry frame (rad) for mapping the contact."""
 
     def __init__(self, kind: str, status: DriveStatus, heading: float = 0.0) -> None:
@@ -71,12 +79,24 @@ class StallWatch:
 class Motion:
     """The primitives on ``drive`` with ``odometry`` fed by the drive's encoders and gyro.
 
-    ``fatal``: called with each status; returns True when the mission must stop (faults)."""
+    ``fatal``: called with each status; returns True when the mission must stop (faults).
+    ``sensed``: called with the odometry pose and every drive status read (range readings for the map).
+    ``range_layout``: where the range sensors sit (``robot.ranging``); None: no range stops."""
 
     def __init__(self, drive: DriveBase, clock: Clock, odometry: Odometry, config: MotionConfig = MotionConfig(),
-                 fatal: Callable[[DriveStatus], bool] = lambda s: False) -> None:
+                 fatal: Callable[[DriveStatus], bool] = lambda s: False,
+                 sensed: Callable[[np.ndarray, DriveStatus], None] | None = None,
+                 range_layout: RangeLayout | None = None) -> None:
         self.drive, self.clock, self.odometry, self.config, self.fatal = drive, clock, odometry, config, fatal
+        self.sensed, self.range_layout = sensed, range_layout
         self._slips = 0
+
+    def status(self) -> DriveStatus:
+        """The drive's status now, handed to ``sensed`` with the pose it was read at."""
+        st = self.drive.status()
+        if self.sensed is not None:
+            self.sensed(self.odometry.pose, st)
+        return st
 
     def _drive(self, vx: float, vy: float, omega: float) -> None:
         """Command a body twist and tell the odometry (it compares the wheels against the command)."""
@@ -91,7 +111,7 @@ class Motion:
     def update_odometry(self, stationary: bool = False):
         """Read encoders and gyro into the odometry; ``stationary``: the drive stands as commanded (every
         primitive has stopped it), so the odometry may learn the gyro's bias (zero-velocity update)."""
-        return self.odometry.update(self.drive.odometry(), self.drive.status().yaw_rate, stationary)
+        return self.odometry.update(self.drive.odometry(), self.status().yaw_rate, stationary)
 
     def stand(self, seconds: float) -> None:
         """Stand still (drive stopped) for ``seconds``, reading the odometry every control tick: the braking
@@ -102,8 +122,23 @@ class Motion:
             self.clock.sleep(min(self.config.control_dt, left))
             self.update_odometry(stationary=True)
 
-    def _check(self, bumper_armed: bool, heading_world: float) -> None:
-        st = self.drive.status()
+    def _in_the_way(self, st: DriveStatus, direction: float, reach: float) -> bool:
+        """A range return in the corridor swept by moving ``reach`` m along ``direction`` (rad, robot frame)?"""
+        layout, cfg = self.range_layout, self.config
+        if layout is None or st.ranges is None or reach <= 0:
+            return False
+        r = layout.check(st.ranges)
+        seen = np.isfinite(r)
+        az = np.asarray(layout.azimuths_rad, float)[seen]
+        dist = layout.mount_radius_m + r[seen]          # from the robot centre
+        along = dist * np.cos(az - direction)
+        across = np.abs(dist * np.sin(az - direction))
+        return bool(np.any((along > 0) & (across < cfg.body_radius_m) & (along < cfg.body_radius_m + reach)))
+
+    def _check(self, bumper_armed: bool, heading_world: float, way: tuple[float, float] | None = None) -> None:
+        """Stop and raise ``Blocked`` on a fault, bumper, stall or slip; ``way``: (direction in the robot frame,
+        rad; distance still to go, m) of a translation that stops for range returns in its way."""
+        st = self.status()
         kind = None
         if self.fatal(st):
             kind = "fault"
@@ -113,6 +148,8 @@ class Motion:
             kind = "stall"
         elif self._slips >= self.config.slip_intervals:
             kind = "slip"
+        elif way is not None and self._in_the_way(st, way[0], min(way[1], self.config.range_stop_m)):
+            kind = "range"
         if kind is not None:
             self.stop()
             self.update_odometry()
@@ -148,17 +185,17 @@ class Motion:
         self.update_odometry()
 
     def translate(self, heading: float, distance: float, speed: float | None = None,
-                  arm_bumper_on_release: bool = False) -> float:
+                  arm_bumper_on_release: bool = False, stop_for_ranges: bool = False) -> float:
         """Move ``distance`` m along ``heading`` (rad, robot frame at the start) keeping the yaw; returns the
         distance made (odometry). ``arm_bumper_on_release``: a bumper pressed at the start only counts once
-        released (backing away from a contact)."""
+        released (backing away from a contact). ``stop_for_ranges``: stop before a range return in the way."""
         cfg = self.config
         speed = cfg.drive_speed if speed is None else speed
         x0, y0, yaw0 = self._tick_odometry()
         world_heading = yaw0 + heading
         ux, uy = math.cos(world_heading), math.sin(world_heading)
         t_end = self.clock.now() + cfg.motion_timeout_factor * (distance / speed + 0.5)
-        armed = not arm_bumper_on_release or not self.drive.status().bumper
+        armed = not arm_bumper_on_release or not self.status().bumper
         watch = StallWatch(cfg, self.clock.now(), 0.0)
         self._slips = 0
         done = 0.0
@@ -173,8 +210,8 @@ class Motion:
                 rel = heading - (yaw - yaw0)  # hold the start yaw: the direction in the body frame turns back
                 self._drive(v * math.cos(rel), v * math.sin(rel), -2.0 * (yaw - yaw0))
                 self.clock.sleep(cfg.control_dt)
-                armed = armed or not self.drive.status().bumper
-                self._check(armed, world_heading)
+                armed = armed or not self.status().bumper
+                self._check(armed, world_heading, (rel, remaining) if stop_for_ranges else None)
                 x, y, _ = self._tick_odometry()
                 if watch.stalled(self.clock.now(), (x - x0) * ux + (y - y0) * uy, v):
                     self.stop()

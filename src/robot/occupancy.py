@@ -1,4 +1,5 @@
-"""Occupancy grid learned by touch: bump contacts, stalls and wheel slip mark obstacles, driving marks free floor.
+"""Occupancy grid learned by touch and by range sensors: bump contacts, stalls and wheel slip mark obstacles,
+range returns mark obstacles ahead of the robot, driving and clear rays mark free floor.
 
 Frame: the odometry/world frame (x, y in m). The grid is ``size_m`` square, centred on ``origin`` (the start
 pose by default), at ``resolution_m``; cells hold log-odds of "an obstacle (for the robot's body) is here",
@@ -11,7 +12,12 @@ pose by default), at ``resolution_m``; cells hold log-odds of "an obstacle (for 
 * ``forget`` (clearing recovery) drops the obstacles that a single contact made when they close every way;
 * the robot's **footprint** along its path is free (log-odds lowered; the footprint is where it was, so
   nothing blocking is there at the robot's height);
-* ``visited`` counts footprint coverage (for exploration).
+* ``visited`` counts footprint coverage (for exploration);
+* **range rays** (``mark_rays``, from ``robot.ranging``) keep their own layer of log-odds: a return raises its
+  cell, the cells the ray crossed are lowered (the usual inverse sensor model of a beam, Thrun et al.,
+  *Probabilistic Robotics* ch. 9). A separate layer because the rays pass 0.105 m above the floor and the bumper
+  reaches down to 0.045 m: a clear ray over low rubble must not erase the contact that found it. A cell is an
+  obstacle when either layer says so.
 
 ``blocked`` is the configuration space for the robot centre: occupied cells grown by ``robot_radius_m``.
 """
@@ -42,6 +48,12 @@ class OccupancyConfig:
     free_log_odds: float = -0.4      # per footprint pass (five passes outweigh one contact)
     occupied_log_odds: float = 1.0   # a cell at or above this is an obstacle
     max_log_odds: float = 6.0
+    range_hit_log_odds: float = 0.7   # per ray return: two returns make an obstacle (one alone may be the floor
+    #                                   seen by a tilted robot on rubble)
+    range_sure_m: float = 0.35        # a return this close is an obstacle at once: the floor seen by a tilted ray
+    #                                   is >= 0.105 m / sin(tilt) away, 0.35 m at a 17 deg tilt
+    range_free_log_odds: float = -0.35  # per ray crossing a cell
+    range_max_log_odds: float = 3.5   # clamp: ten crossings clear a confirmed return again (odometry drifts)
 
     def __post_init__(self) -> None:
         need(self, self.resolution_m > 0, "resolution_m", "> 0 m")
@@ -52,6 +64,10 @@ class OccupancyConfig:
         need(self, 0 < self.stall_log_odds <= self.hit_log_odds, "stall_log_odds", "in (0, hit_log_odds]")
         need(self, self.free_log_odds < 0, "free_log_odds", "< 0")
         need(self, 0 < self.occupied_log_odds <= self.max_log_odds, "occupied_log_odds", "in (0, max_log_odds]")
+        need(self, self.range_hit_log_odds > 0, "range_hit_log_odds", "> 0")
+        need(self, self.range_free_log_odds < 0, "range_free_log_odds", "< 0")
+        need(self, self.range_sure_m >= 0, "range_sure_m", ">= 0 m")
+        need(self, self.range_max_log_odds >= self.occupied_log_odds, "range_max_log_odds", ">= occupied_log_odds")
 
 
 class OccupancyGrid:
@@ -61,7 +77,8 @@ class OccupancyGrid:
         self.config = config
         self.n = int(math.ceil(config.size_m / config.resolution_m))
         self.origin = np.asarray(origin, float)[:2] - 0.5 * self.n * config.resolution_m  # corner of cell (0, 0)
-        self.log_odds = np.zeros((self.n, self.n))
+        self.log_odds = np.zeros((self.n, self.n))          # touch: contacts, stalls, footprints
+        self.range_log_odds = np.zeros((self.n, self.n))    # range rays (and footprints)
         self.visited = np.zeros((self.n, self.n), dtype=np.int32)
         self.contacts: list[tuple[float, float, str]] = []   # (x, y, why): where contacts were marked
         self._blocked: np.ndarray | None = None
@@ -97,6 +114,8 @@ class OccupancyGrid:
         cfg = self.config
         ii, jj = self._disc(xy, cfg.robot_radius_m * 0.75)
         self.log_odds[ii, jj] = np.maximum(self.log_odds[ii, jj] + cfg.free_log_odds, -cfg.max_log_odds)
+        self.range_log_odds[ii, jj] = np.maximum(self.range_log_odds[ii, jj] + cfg.free_log_odds,
+                                                 -cfg.range_max_log_odds)
         self.visited[ii, jj] += 1
         self._blocked = None
 
@@ -126,13 +145,42 @@ class OccupancyGrid:
         self._blocked = None
         return centre
 
+    def mark_rays(self, starts, ends, hit) -> None:
+        """Range rays (world m, ``robot.ranging.ray_ends``): each lowers the range layer in the cells it crossed
+        from ``starts`` to ``ends`` and, where ``hit``, raises the cell of its end (the surface it saw); a return
+        within ``range_sure_m`` makes its cell an obstacle at once."""
+        cfg = self.config
+        starts, ends = np.asarray(starts, float).reshape(-1, 2), np.asarray(ends, float).reshape(-1, 2)
+        hit = np.asarray(hit, bool).reshape(-1)
+        if not len(starts):
+            return
+        n = int(math.ceil(float(np.max(np.linalg.norm(ends - starts, axis=1))) / (0.5 * self.resolution))) + 1
+        t = np.linspace(0.0, 1.0, n + 1)[None, :, None]
+        ij = np.floor((starts[:, None] + t * (ends - starts)[:, None] - self.origin) / self.resolution).astype(int)
+        end_ij = ij[:, -1]
+        ok = ((ij >= 0) & (ij < self.n)).all(axis=-1)
+        # a ray's own end cell is not crossed when it saw a surface there
+        ok &= ~(hit[:, None] & (ij == end_ij[:, None]).all(axis=-1))
+        free = np.unique(ij[ok, 0] * self.n + ij[ok, 1])
+        inside = ((end_ij >= 0) & (end_ij < self.n)).all(axis=-1)
+        near = np.linalg.norm(ends - starts, axis=1) <= cfg.range_sure_m
+        hit_idx = np.unique(end_ij[hit & inside, 0] * self.n + end_ij[hit & inside, 1])
+        sure_idx = np.unique(end_ij[hit & inside & near, 0] * self.n + end_ij[hit & inside & near, 1])
+        free = np.setdiff1d(free, hit_idx, assume_unique=True)
+        lo = self.range_log_odds.reshape(-1)           # a view: updates land in the grid
+        lo[free] = np.maximum(lo[free] + cfg.range_free_log_odds, -cfg.range_max_log_odds)
+        lo[hit_idx] = np.minimum(lo[hit_idx] + cfg.range_hit_log_odds, cfg.range_max_log_odds)
+        lo[sure_idx] = np.maximum(lo[sure_idx], cfg.occupied_log_odds)
+        self._blocked = None
+
     def forget(self) -> int:
         """Clearing recovery (as ROS navigation's costmap reset when no plan exists): take one contact's worth of
         evidence (``hit_log_odds``) off every obstacle cell, so that cells marked by a single contact become
         unknown again and cells confirmed by repeated contacts stay. Touch is an unsure sensor in rubble: a
         contact is placed by drifting odometry (measured 0.1-0.3 m after 100 s of bumping in dense_pump) and
         a stall can be a wheel on debris, not an obstacle; a ring of such marks closes the robot in for good.
-        Returns how many cells stopped being obstacles."""
+        Range returns are kept: rays clear their own mistakes as the robot moves. Returns how many cells stopped
+        being obstacles."""
         cfg = self.config
         before = self.occupied
         pos = self.log_odds > 0
@@ -143,7 +191,8 @@ class OccupancyGrid:
     # -- reading --------------------------------------------------------------------------
     @property
     def occupied(self) -> np.ndarray:
-        return self.log_odds >= self.config.occupied_log_odds
+        occ = self.config.occupied_log_odds
+        return (self.log_odds >= occ) | (self.range_log_odds >= occ)
 
     @property
     def blocked(self) -> np.ndarray:

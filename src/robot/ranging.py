@@ -2,7 +2,7 @@
 
 The robot carries ``len(azimuths_rad)`` Sharp GP2Y0A21YK0F-class infrared distance sensors (datasheet: 10-80 cm,
 a narrow beam, a new reading every 38.3 +- 9.6 ms), looking out horizontally from a ring of radius
-``mount_radius_m`` at ``height_m`` above the floor. The ring lies inside the bumper (radius 0.16 m) so that the
+``mount_radius_m`` at ``height_m`` above the floor (robot frame: the floor under the wheels is z = 0). The ring lies inside the bumper (radius 0.16 m) so that the
 sensor's 10 cm dead zone, where its output folds back, ends at the bumper: anything the bumper has not touched is
 at least ``min_range_m`` away. ``height_m`` lies inside the bumper band (0.045-0.11 m): what the rays see, the
 bumper would hit.
@@ -31,7 +31,7 @@ class RangeLayout:
 
     azimuths_rad: tuple[float, ...] = tuple(k * math.pi / 4 for k in range(8))  # eight, 45 deg apart
     mount_radius_m: float = 0.06     # ray origins: 0.06 m + the 0.10 m dead zone = the bumper's 0.16 m
-    height_m: float = 0.10           # above the floor, inside the bumper band
+    height_m: float = 0.105          # above the floor: inside the bumper band (0.045-0.11 m), over the wheels (0.10)
     min_range_m: float = 0.10        # GP2Y0A21YK0F datasheet: 10 cm ...
     max_range_m: float = 0.80        # ... to 80 cm
 

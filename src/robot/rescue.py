@@ -58,9 +58,14 @@ from robot.occupancy import OccupancyConfig, OccupancyGrid
 from robot.odometry import GyroFusionConfig, Odometry, TravelConfig, wrap_angle
 from robot.planner import Plan, Planner, PlannerConfig
 from robot.protocol import FAULT_NAMES
+from robot.ranging import RangeLayout, ray_ends
 from robot.sound_map import DISTINCT_POSES_M, MapSource, SoundMap, SoundMapConfig, SourceClass, SourceState
 
 log = logging.getLogger(__name__)
+
+#: Range readings go into the grid once per 5 cm of travel or 10 deg of turn (control ticks are 1.25 cm apart).
+SCAN_SPACING_M = 0.05
+SCAN_TURN = math.radians(10.0)
 
 
 class RescueState(str, Enum):
@@ -88,6 +93,7 @@ class Decision(str, Enum):
     VICTIM_FOUND = "victim_found"  # data: position (x, y) estimated, height, source, criterion, sigma_m
     REJECTED = "rejected"          # an interferer reached and still without voice: data source, position
     RECOVER = "recover"            # data: bumper, stalled, kind, contact (world x, y)
+    OBSTACLE = "obstacle"          # a move stopped before a range return in its way; data: ranges (m, per sensor)
     DRIVE_FAULT = "drive_fault"    # data: faults
     ALL_FOUND = "all_found"        # data: victims
     STUCK = "stuck"
@@ -280,7 +286,7 @@ class RescueBehaviour:
                  sound_map: SoundMapConfig = SoundMapConfig(), planner: PlannerConfig = PlannerConfig(),
                  occupancy: OccupancyConfig = OccupancyConfig(), params: OmniDriveParams = OmniDriveParams(),
                  gyro: GyroFusionConfig = GyroFusionConfig(), travel: TravelConfig = TravelConfig(),
-                 coverage: CoverageConfig = CoverageConfig(),
+                 coverage: CoverageConfig = CoverageConfig(), range_layout: RangeLayout = RangeLayout(),
                  start_pose=(0.0, 0.0, 0.0), geometry=None, speech=None) -> None:
         self.audio, self.drive, self.clock, self.localizer, self.config = audio, drive, clock, localizer, config
         geometry = geometry if geometry is not None else getattr(localizer, "geometry", None)
@@ -292,7 +298,10 @@ class RescueBehaviour:
         if loc_fs is not None and int(loc_fs) != audio.sample_rate:
             raise ValueError(f"localizer fs is {loc_fs} Hz but the audio source delivers {audio.sample_rate} Hz")
         self.odometry = Odometry(params, start_pose, gyro, travel)
-        self.motion = Motion(drive, clock, self.odometry, motion, fatal=self._check_faults)
+        self.motion = Motion(drive, clock, self.odometry, motion, fatal=self._check_faults, sensed=self._sensed,
+                             range_layout=range_layout)
+        self.range_layout = range_layout
+        self._scan_pose: np.ndarray | None = None   # where the last range reading went into the grid
         self.listener = Listener(audio, clock, localizer, mics, config.voice_threshold, speech)
         self.map = SoundMap(dataclasses.replace(sound_map, array_height_m=config.array_height_m))
         self.grid = OccupancyGrid(occupancy, origin=np.asarray(start_pose, float)[:2])
@@ -402,6 +411,18 @@ class RescueBehaviour:
                                           "elevation": el, "path_m": plan.length,
                                           "waypoints": plan.waypoints.tolist()})
         self._follow(plan, RescueState.APPROACH, Decision.DRIVE, src)
+
+    def _sensed(self, pose: np.ndarray, status: DriveStatus) -> None:
+        """Range readings into the occupancy grid: one per ``SCAN_SPACING_M`` of travel or ``SCAN_TURN`` of turn,
+        as readings taken from one spot repeat the same error (a tilted ray on the same floor)."""
+        if status.ranges is None:
+            return
+        last = self._scan_pose
+        if last is not None and math.hypot(*(pose[:2] - last[:2])) < SCAN_SPACING_M \
+                and abs(wrap_angle(pose[2] - last[2])) < SCAN_TURN:
+            return
+        self._scan_pose = np.array(pose, float)
+        self.grid.mark_rays(*ray_ends(self.range_layout, pose, status.ranges))
 
     def _listen(self) -> list[tuple[ListenEvidence, int]]:
         cfg = self.config
@@ -734,7 +755,7 @@ class RescueBehaviour:
             dx, dy = leg - start
             heading = float(wrap_angle(math.atan2(dy, dx) - self.pose[2]))
             try:
-                self.motion.translate(heading, float(np.hypot(dx, dy)))
+                self.motion.translate(heading, float(np.hypot(dx, dy)), stop_for_ranges=True)
             except Blocked as b:
                 self.grid.mark_path(start, self.pose[:2])
                 self._blocked(b, target)
@@ -745,7 +766,7 @@ class RescueBehaviour:
         cfg = self.config
         if b.kind == "fault":
             return  # the mission is over (_check_faults finished it)
-        if b.kind == "bumper" and target is not None:
+        if b.kind in ("bumper", "range") and target is not None:
             s = self.map.source(target.id)
             x, y, _ = self.pose
             d = s.distance_to((x, y))
@@ -762,9 +783,10 @@ class RescueBehaviour:
                     and s.horizontal_sigma_m <= 2 * cfg.found_sigma_m and voiced and down \
                     and self.clock.now() - s.last_time <= cfg.bump_heard_within_s \
                     and (s.cls is SourceClass.VICTIM or not self._near_machine(s)):
-                self._declare_found(s, f"bumped into it while approaching (estimate {d:.2f} m ahead, "
+                touch = "bumped into it" if b.kind == "bumper" else "stopped before an obstacle at it"
+                self._declare_found(s, f"{touch} while approaching (estimate {d:.2f} m ahead, "
                                        f"{math.degrees(off):.0f} deg off the motion)")
-                if not self.done:
+                if not self.done and b.kind == "bumper":
                     self._back_off(b.heading, "clear the bumper after touching the victim")
                 return
         if target is not None:
@@ -773,6 +795,12 @@ class RescueBehaviour:
                 # Walls the robot cannot see: a mirror image beyond a wall draws it along the wall forever.
                 self.planner.mark_unreachable(target.id, self.clock.now())
                 self._target_contacts[target.id] = 0
+        if b.kind == "range":
+            self._scan_pose = None
+            self._sensed(self.pose, b.status)     # the reading that stopped the move goes into the grid
+            seen = [round(r, 2) if math.isfinite(r) else None for r in b.status.ranges or ()]
+            self._emit(Decision.OBSTACLE, "range sensors see an obstacle in the way: replan", {"ranges": seen})
+            return
         self._recover(b, "while moving")
 
     def _recover(self, b: Blocked, when: str) -> None:

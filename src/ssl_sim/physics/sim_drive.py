@@ -11,6 +11,7 @@ import numpy as np
 
 from robot.hal import Clock, DriveBase, DriveStatus, WheelOdometry
 from robot.protocol import ENCODER_WINDOW_S, GYRO_COUNTS_PER_RAD_S
+from robot.ranging import RangeLayout
 from ssl_sim.physics.sim_robot import SimRobot
 
 
@@ -47,18 +48,30 @@ class SimDriveBase(DriveBase):
       instability on an Allan plot, robotics.stackexchange.com/q/8860);
     * the firmware's rounding to whole counts of 1/65.5 deg/s (``robot.protocol.GYRO_COUNTS_PER_RAD_S``).
     Sensitivity (datasheet: +-3 %) and cross-axis errors are not modelled. ``seed`` seeds noise and drift.
-    ``gyro_bias`` holds the bias now (truth for tests)."""
+    ``gyro_bias`` holds the bias now (truth for tests).
+
+    ``ranges``: the infrared range sensors of ``range_layout`` (``robot.ranging``; None: none fitted), MuJoCo rays
+    from the true pose (``SimRobot.ray_distances``) plus Gaussian noise of ``range_noise`` times the distance (an
+    assumption: the GP2Y0A21YK0F datasheet gives no noise figure; a few per cent of the reading is what hobby
+    measurements of it show), held to ``min_range_m`` below it and rounded to whole centimetres as the firmware
+    reports them; inf where nothing is within ``max_range_m``. One reading per physics instant."""
 
     def __init__(self, robot: SimRobot, stall_min_speed: float = 1.0, stall_ratio: float = 0.25,
                  stall_time: float = 0.3, gyro_noise_density: float = math.radians(0.005),
                  gyro_window: float = ENCODER_WINDOW_S, gyro_bias: float = math.radians(0.1),
-                 gyro_bias_walk: float = math.radians(0.001), seed: int = 0) -> None:
+                 gyro_bias_walk: float = math.radians(0.001), seed: int = 0,
+                 range_layout: RangeLayout | None = RangeLayout(), range_noise: float = 0.02) -> None:
         if not gyro_window > 0:
             raise ValueError(f"gyro_window: expected > 0 s, got {gyro_window}")
         if not (gyro_noise_density >= 0 and gyro_bias_walk >= 0 and math.isfinite(gyro_bias)):
             raise ValueError("gyro_noise_density, gyro_bias_walk: expected >= 0; gyro_bias: finite (rad/s), got "
                              f"{gyro_noise_density}, {gyro_bias_walk}, {gyro_bias}")
+        if not range_noise >= 0:
+            raise ValueError(f"range_noise: expected >= 0 (a fraction of the distance), got {range_noise}")
         self.robot = robot
+        self.range_layout, self.range_noise = range_layout, float(range_noise)
+        self._range_rng = np.random.default_rng([seed, 1])   # its own stream: the gyro's draws stay as they were
+        self._ranges: tuple[float, tuple[float, ...]] | None = None
         self.stall_min_speed, self.stall_ratio, self.stall_time = stall_min_speed, stall_ratio, stall_time
         self._slow_since: float | None = None
         self.gyro_window = float(gyro_window)
@@ -102,7 +115,21 @@ class SimDriveBase(DriveBase):
             rate = self.robot.mean_yaw_rate(w, end) + self.gyro_bias + self.gyro_sigma * float(self._rng.normal())
             self._window = (end, round(rate * GYRO_COUNTS_PER_RAD_S) / GYRO_COUNTS_PER_RAD_S)
         yaw_rate = self._window[1]
-        return DriveStatus(bumper=self.robot.bumper(), stalled=stalled, yaw_rate=yaw_rate)
+        return DriveStatus(bumper=self.robot.bumper(), stalled=stalled, yaw_rate=yaw_rate, ranges=self._read_ranges())
+
+    def _read_ranges(self) -> tuple[float, ...] | None:
+        layout = self.range_layout
+        if layout is None:
+            return None
+        now = self.robot.time
+        if self._ranges is None or self._ranges[0] != now:
+            d = self.robot.ray_distances(layout)
+            seen = np.isfinite(d)
+            noisy = d[seen] * (1.0 + self.range_noise * self._range_rng.standard_normal(int(seen.sum())))
+            d[seen] = np.round(np.maximum(noisy, layout.min_range_m) * 100.0) / 100.0
+            d[d > layout.max_range_m] = np.inf
+            self._ranges = (now, tuple(float(v) for v in d))
+        return self._ranges[1]
 
     def close(self) -> None:
         self.stop()

@@ -15,6 +15,7 @@ import numpy as np
 
 from robot.hal import WheelOdometry
 from robot.kinematics import OmniDriveParams, twist_to_wheels
+from robot.ranging import RangeLayout
 from ssl_sim.physics import robot_model as rm
 from ssl_sim.physics.world_mjcf import FLOOR_GEOM, world_spec
 from ssl_sim.world import World
@@ -23,6 +24,8 @@ from ssl_sim.world import World
 _FATAL_WARNINGS = (mujoco.mjtWarning.mjWARN_BADQACC, mujoco.mjtWarning.mjWARN_BADQPOS, mujoco.mjtWarning.mjWARN_BADQVEL,
                    mujoco.mjtWarning.mjWARN_CNSTRFULL, mujoco.mjtWarning.mjWARN_CONTACTFULL,
                    mujoco.mjtWarning.mjWARN_INERTIA)
+#: Geom groups the range sensors see: the world's solids are group 0 (the robot's visual-only parts are 1 and 3).
+_RAY_GROUPS = np.array([1, 0, 0, 0, 0, 0], np.uint8)
 _FATAL_INDEX = np.array([int(w) for w in _FATAL_WARNINGS])
 
 
@@ -103,6 +106,7 @@ class SimRobot:
         self._mics = np.array([m.site(rm.mic_site(i)).id for i in range(config.array.n_mics)])
         self._motors = np.array([m.geom(f"motor{i}_body").id for i in range(3)])
         self._robot_bodies = self._subtree(self._base)
+        self._robot_geoms = frozenset(g for g in range(m.ngeom) if m.geom_bodyid[g] in self._robot_bodies)
         self._floor = m.geom(FLOOR_GEOM).id
         self._bumper = m.geom(rm.BUMPER_GEOM).id
         # Static geoms the bumper can meet: everything of the world's but the floor and small debris.
@@ -303,6 +307,25 @@ class SimRobot:
 
     def imu(self) -> Imu:
         return Imu(self.sensor("imu_accel"), self.sensor("imu_gyro"), self.sensor("imu_quat"))
+
+    def ray_distances(self, layout: RangeLayout) -> np.ndarray:
+        """Ground truth of ``layout``'s range sensors now: the distance (m) from each sensor along its ray (robot
+        frame, tilted with the base) to the first world geom, ``inf`` beyond ``max_range_m``. The robot's own
+        geoms are not seen (the base is excluded; the rays pass over the wheels)."""
+        self._sync()
+        d = self.data
+        rot = d.xmat[self._base].reshape(3, 3)
+        az = np.asarray(layout.azimuths_rad, float)
+        u = np.stack([np.cos(az), np.sin(az), np.zeros_like(az)], axis=1)
+        starts = d.xpos[self._base] + (layout.mount_radius_m * u + [0.0, 0.0, layout.height_m]) @ rot.T
+        dirs = u @ rot.T
+        out = np.full(len(az), np.inf)
+        geom = np.zeros(1, np.int32)
+        for k in range(len(az)):
+            r = mujoco.mj_ray(self.model, d, starts[k], dirs[k], _RAY_GROUPS, 1, self._base, geom)
+            if 0 <= r <= layout.max_range_m and geom[0] not in self._robot_geoms:
+                out[k] = r
+        return out
 
     def mic_positions(self) -> np.ndarray:
         """World positions of the microphones (n_mics, 3), m, from the model's mic sites."""
