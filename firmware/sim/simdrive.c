@@ -34,6 +34,8 @@
  *                             with ms, release them after that much simulated time
  *        GYRO <rad/s>         the gyro's true Z rate (the test adds any bias it wants)
  *        GYRO unplug | plug   the chip stops answering / is plugged in again (powered up afresh)
+ *        ADC <ch> <mV>        the voltage on analog input ADC<ch> (PF<ch>, Mega A<ch>), 0..7, in
+ *                             millivolts (AVcc = AREF = 5000 mV); all start at 0 V
  *
  * usage: simdrive [--stall WHEEL] [--speed X] [--duration S] [--cpr N] [--max-speed RADS]
  *                 [--pwm-top N] [--profile ADDR] [--no-gyro] firmware.elf
@@ -52,6 +54,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "avr_adc.h"
 #include "avr_ioport.h"
 #include "avr_twi.h"
 #include "avr_uart.h"
@@ -72,6 +75,7 @@ DEFINE_FIFO(uint16_t, uart_fifo);                /* the header only declares the
 #define SYNC_CYCLES 800          /* 50 us: pty pumping, throttling, motor model step */
 #define ENC_REPORT_CYCLES (F_SIM / 20)
 #define MAX_LAG_S 0.002          /* lag beyond this is given up, never caught up */
+#define SUPPLY_MV 5000           /* VCC = AVCC = AREF: the Mega's regulated 5 V */
 
 static avr_t *avr;
 static avr_uart_t *uart0;
@@ -163,6 +167,8 @@ static void set_bumpers(uint8_t pressed)
         avr_raise_irq(bump_irq[i], (pressed >> i) & 1 ? 0 : 1);
 }
 
+static avr_irq_t *adc_irq;
+
 static void run_command(char *line)
 {
     char *arg = strchr(line, ' ');
@@ -191,6 +197,15 @@ static void run_command(char *line)
         else
             gyro_part_set_rate(atof(arg));
         printf("GYRO %llu %s\n", (unsigned long long)avr->cycle, arg);
+    } else if (!strcmp(line, "ADC") && arg) {
+        int ch = -1;
+        double mv = -1;
+        if (sscanf(arg, "%d %lf", &ch, &mv) == 2 && ch >= 0 && ch < 8 && mv >= 0 && mv <= SUPPLY_MV) {
+            avr_raise_irq(adc_irq + ADC_IRQ_ADC0 + ch, (uint32_t)lround(mv));
+            printf("ADC %llu %d %ld\n", (unsigned long long)avr->cycle, ch, lround(mv));
+        } else {
+            fprintf(stderr, "simdrive: ADC expects <channel 0..7> <millivolts 0..%d>, got %s\n", SUPPLY_MV, arg);
+        }
     } else {
         fprintf(stderr, "simdrive: unknown command %s\n", line);
     }
@@ -325,6 +340,7 @@ int main(int argc, char **argv)
     }
     avr_init(avr);
     avr_load_firmware(avr, &fw);
+    avr->vcc = avr->avcc = avr->aref = SUPPLY_MV;      /* simavr's ADC scales readings by these (mV) */
     avr->sleep = no_sleep;                       /* we throttle against the wall clock ourselves */
     /* simavr advances a sleeping core to its next cycle timer *before* servicing the interrupt
      * that should wake it, which would delay wake-ups by up to a tick period (1 ms here) and
@@ -359,6 +375,9 @@ int main(int argc, char **argv)
     set_bumpers(0);
     if (with_gyro)
         gyro_part_attach(avr, AVR_IOCTL_TWI_GETIRQ(0));
+    adc_irq = avr_io_getirq(avr, AVR_IOCTL_ADC_GETIRQ, 0);
+    for (int ch = 0; ch < 8; ch++)
+        avr_raise_irq(adc_irq + ADC_IRQ_ADC0 + ch, 0);
     fcntl(STDIN_FILENO, F_SETFL, fcntl(STDIN_FILENO, F_GETFL) | O_NONBLOCK);
 
     int slave;
