@@ -20,7 +20,7 @@
  * O. Kamppari's GP2Y0A21 driver, 2017). Between points the output is close to linear in
  * 1/distance (the data sheet's second figure plots it against 1/(L + 0.42 cm)), so the
  * table is interpolated piecewise-linearly in 1/distance.
- * Above the 10 cm voltage: the output peaks near 3.1 V at about 7 cm and folds back below
+ * Above the 10 cm voltage: the output peaks above 3 V at 6-8 cm and folds back below
  * that; on the robot that zone lies inside the bumper ring (robot.ranging.RangeLayout), so a
  * reading above the 10 cm point is clamped to 10 cm. Below the 80 cm voltage: no return. */
 #include "config.h"
