@@ -665,6 +665,27 @@ def test_ranges_reach_status_in_sensor_order(board, drive):
     print(f"ranges: worst error {worst:.2f} of its tolerance")
 
 
+def test_ranges_wait_for_the_sensors_power_up(built):
+    """The GP2Y0A21YK0F's first output is valid 38.3 + 9.6 + 5 ms after power-up (data sheet timing chart):
+    RANGES_OK only from the first 50 ms window that starts after that (100-150 ms), i.e. from 150 ms on."""
+    b = SimBoard()
+    try:
+        _set_adc(b, [1000 * sharp_volts(30.0)] * 8)    # 30 cm everywhere from the start
+        with SerialDrive(b.port, steady(keepalive=None)) as d:
+            seen = []
+            while not (t := d.telemetry()).ranges_ok:
+                seen.append(t.uptime_ms)
+                assert t.ranges_cm == (P.RANGE_NO_RETURN,) * P.RANGE_SLOTS
+                assert d.status().ranges is None
+                assert t.uptime_ms < 2000, "ranges never became valid"
+                time.sleep(0.01)
+            assert t.uptime_ms >= 150, t.uptime_ms
+            assert d.status().ranges == pytest.approx((0.30,) * 8, abs=range_tolerance_cm(30.0) / 100)
+    finally:
+        b.close()
+    print(f"ranges valid at {t.uptime_ms} ms after reset ({len(seen)} polls before, last at {seen[-1:]} ms)")
+
+
 def test_range_sensor_count_mismatch_is_refused(board, built):
     four = RangeLayout(azimuths_rad=(0.0, math.pi / 2, math.pi, -math.pi / 2))
     with pytest.raises(DriveLinkError, match=r"reads 8 range sensors.*range_layout expects 4"):
