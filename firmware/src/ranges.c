@@ -4,20 +4,20 @@
  * its channel, selects the next and starts it (single conversions chained by the ISR, so the
  * result always belongs to the channel selected before it started, on the chip as in simavr;
  * a free-running ADC would convert the old channel once more after every switch). 16 MHz /128
- * = 125 kHz ADC clock (the 50-200 kHz of full 10-bit resolution, ATmega2560 data sheet §26.4),
+ * = 125 kHz ADC clock (within the 50-200 kHz of full 10-bit resolution, ATmega2560 data sheet),
  * 13 ADC clocks = 104 us per conversion, 0.83 ms per sweep of eight. AVcc reference: on the
  * robot the Mega's 5 V comes from its on-board regulator, and the sensors run from it too.
  *
  * Averaging: the GP2Y0A21YK0F updates its output once per 38.3 +- 9.6 ms measurement (data
- * sheet, timing chart) with spikes at its LED pulses; the mean of all samples in a
- * RANGE_WINDOW_MS window (25 per sensor) spans about one measurement and smooths the spikes.
+ * sheet, timing chart); the mean of all samples in a RANGE_WINDOW_MS window (25 per sensor)
+ * spans about one measurement and averages the output's noise (dithering below one ADC step).
  *
  * Voltage -> distance: Sharp GP2Y0A21YK0F data sheet
  * (https://global.sharp/products/device/lineup/data/pdf/datasheet/gp2y0a21yk_e.pdf),
  * typical values, white paper (90 % reflectance): the electro-optical table gives
  * Vo = 0.4 V at L = 80 cm and dVo = 1.9 V from 80 cm to 10 cm (so 2.3 V at 10 cm); the
- * points between are read off its output-vs-distance figure (also tabulated that way by
- * O. Kamppari's GP2Y0A21 driver, 2017). Between points the output is close to linear in
+ * points between are read off its output-vs-distance figure on page 5 (as also tabulated in
+ * O. Kamppari's GP2Y0A21.cpp driver, 2017). Between points the output is close to linear in
  * 1/distance (the data sheet's second figure plots it against 1/(L + 0.42 cm)), so the
  * table is interpolated piecewise-linearly in 1/distance.
  * Above the 10 cm voltage: the output peaks above 3 V at 6-8 cm and folds back below
@@ -38,7 +38,7 @@ static uint8_t cm[RANGE_SLOTS];
 
 #if RANGE_SENSORS
 #define OVERSAMPLE  8u      /* window means are kept in 1/8 ADC counts */
-/* mV -> 1/8 ADC counts at the 5.000 V AVcc reference: ADC = Vin * 1024 / Vref (data sheet §26.7) */
+/* mV -> 1/8 ADC counts at the 5.000 V AVcc reference: ADC = Vin * 1024 / Vref (ATmega2560 data sheet) */
 #define Q(mv)       ((uint16_t)(((uint32_t)(mv) * 1024u * OVERSAMPLE + 2500u) / 5000u))
 #define INV(d)      ((uint16_t)((65536ul + (d) / 2) / (d)))         /* 2^16 / d (cm) */
 
