@@ -192,6 +192,10 @@ def test_firmware_constants_match_python(built):
     assert val["GYRO_LSB_PER_DPS_X10"] / 10 * 180 / math.pi == pytest.approx(P.GYRO_COUNTS_PER_RAD_S)
     assert val["ENC_WINDOW_MS"] / 1000 == pytest.approx(P.ENCODER_WINDOW_S)
     assert val["RANGE_SENSORS"] == RangeLayout().n
+    rh = dict(re.findall(r"#define\s+(RANGE_\w+)\s+(\d+)u\b", (FW / "src" / "ranges.h").read_text()))
+    assert int(rh["RANGE_NO_RETURN"]) == P.RANGE_NO_RETURN
+    assert int(rh["RANGE_MIN_CM"]) == P.RANGE_MIN_CM == round(RangeLayout().min_range_m * 100)
+    assert int(rh["RANGE_MAX_CM"]) == P.RANGE_MAX_CM == round(RangeLayout().max_range_m * 100)
     proto = (FW / "src" / "protocol.h").read_text()
     pv = {k: int(v, 0) for k, v in re.findall(r"#define\s+(\w+)\s+(0x[0-9A-Fa-f]+|\d+)u?\b", proto)}
     assert pv["PROTO_VERSION"] == P.PROTOCOL_VERSION
