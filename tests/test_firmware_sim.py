@@ -631,10 +631,10 @@ def range_tolerance_cm(d_cm: float) -> float:
     return 0.5 + 2 * ADC_LSB_V * cm_per_v + 0.1
 
 
-def _set_adc(board, millivolts) -> int:
+def _set_adc(board, millivolts, swings=None) -> int:
     c = 0
     for ch, mv in enumerate(millivolts):
-        c = board.command(f"ADC {ch} {mv:.0f}", "ADC")
+        c = board.command(f"ADC {ch} {mv:.0f} {swings[ch] if swings else 0:.0f}", "ADC")
     return c
 
 
@@ -667,6 +667,26 @@ def test_ranges_reach_status_in_sensor_order(board, drive):
                 assert err <= range_tolerance_cm(w), (i, w, got, range_tolerance_cm(w))
     _set_adc(board, [0] * 8)
     print(f"ranges: worst error {worst:.2f} of its tolerance")
+
+
+def test_ranges_are_the_distance_of_the_window_mean(board, drive):
+    """An input whose conversions alternate between V + s and V - s (the harness's ripple) reads as the
+    distance of the mean V, not as either level (a single sample or a median would) nor as the mean of
+    their two distances: the firmware averages each window's samples (25 per sensor in 50 ms) before
+    converting. With an odd count the mean keeps s / 25 of the ripple: added to the tolerance."""
+    cases = [(30.0, 400.0), (50.0, 200.0), (22.0, 300.0), (65.0, 40.0)]     # distance at the mean, swing (mV)
+    mv = [1000 * sharp_volts(d) for d, _ in cases] + [0.0] * 4
+    c = _set_adc(board, mv, [sw for _, sw in cases] + [0.0] * 4)
+    board.wait_sim(c + int(0.12 * F_CPU))
+    st = drive.status()
+    for (d, sw), got in zip(cases, st.ranges):
+        cm_per_v = 1.0 / (sharp_volts(d - 0.5) - sharp_volts(d + 0.5))
+        tol = range_tolerance_cm(d) + cm_per_v * sw / 1000 / 24
+        assert abs(got * 100 - d) <= tol, (d, sw, got, tol)
+    assert st.ranges[4:] == (math.inf,) * 4
+    _set_adc(board, [0] * 8)
+    # e.g. 30 cm: the two levels alone are 20 and 60 cm, their distances' mean 40 cm
+    print("ranges of rippled inputs:", [round(r * 100, 1) for r in st.ranges[:4]], "cm for", [d for d, _ in cases])
 
 
 def test_ranges_wait_for_the_sensors_power_up(built):
