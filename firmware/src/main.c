@@ -232,13 +232,16 @@ int main(void)
                 max_cmd_cycles = dt;
         }
 
-        /* sleep until the next interrupt unless there is work; sei; sleep is atomic */
+        /* sleep until there is work (a received byte or a tick); an interrupt that brings
+         * neither (ADC conversions, encoder edges, I2C, transmit) sleeps again at once
+         * instead of running the loop; sei; sleep is atomic */
         cli();
-        if (!link_rx_new() && g_ms == done_ms) {
+        while (!link_rx_new() && g_ms == done_ms) {
             sleep_enable();
             sei();
             sleep_cpu();
             sleep_disable();
+            cli();
         }
         sei();
     }
