@@ -9,7 +9,10 @@
   (UART RXC) to the last motor-output register write, for SET_TWIST, SET_HEADING, STOP;
 * IK match: firmware duty vs ``robot.kinematics.twist_to_wheels`` over random twists;
 * link loss: simulated time from a motion command's last byte to the start of the watchdog
-  ramp and to zero duty on all wheels, from full, half and 10 % duty (requirement: <= 300 ms).
+  ramp and to zero duty on all wheels, from full, half and 10 % duty (requirement: <= 300 ms);
+* range sensors: cycles of every ADC interrupt (one conversion read, the next started) and of
+  every ``ranges_tick`` call (the tick that converts one sensor's window mean to cm is the
+  worst), each from its own short run with all eight inputs driven, and the CPU share.
 
 All times are simulated CPU cycles at 16 MHz. Prints a table and one JSON line.
 Run: .venv/bin/python benchmarks/bench_firmware.py
@@ -65,7 +68,7 @@ def symbol(name: str) -> int:
 
 class Board:
     def __init__(self, *args: str):
-        self.proc = subprocess.Popen([str(SIM), *args, str(ELF)], stdout=subprocess.PIPE,
+        self.proc = subprocess.Popen([str(SIM), *args, str(ELF)], stdin=subprocess.PIPE, stdout=subprocess.PIPE,
                                      stderr=subprocess.DEVNULL, text=True)
         self.port = self.proc.stdout.readline().split()[1]
         self.pwm: list[tuple[int, tuple[int, int, int], int]] = []
@@ -184,6 +187,27 @@ def link_loss(drive: SerialDrive, board: Board) -> dict:
     return out
 
 
+def range_costs(seconds: float = 0.5) -> dict:
+    """Cycles per call of the ADC interrupt and of ranges_tick (cycle-exact, --profile), inputs at 0.3-2.3 V."""
+    out = {}
+    for name, sym in (("adc_isr", "__vector_29"), ("ranges_tick", "ranges_tick")):
+        board = Board("--profile", hex(symbol(sym)))
+        try:
+            for ch in range(8):
+                board.proc.stdin.write(f"ADC {ch} {300 + 250 * ch}\n")
+            board.proc.stdin.flush()
+            time.sleep(seconds)
+        finally:
+            board.close()
+        prof = board.prof[10:]                       # past start-up
+        calls = np.array([c for _, c in prof], float)
+        span = (prof[-1][0] - prof[0][0]) / F_CPU
+        out[name] = {"calls_per_s": len(prof) / span, "min_cycles": int(calls.min()),
+                     "median_cycles": float(np.median(calls)), "max_cycles": int(calls.max()),
+                     "cpu_pct": 100 * calls.sum() / (span * F_CPU)}
+    return out
+
+
 def main() -> None:
     missing = [t for t in ("avr-gcc", "avr-size", "avr-nm", "make") if shutil.which(t) is None]
     if missing or not Path("/usr/include/simavr/sim_avr.h").exists():
@@ -199,6 +223,7 @@ def main() -> None:
             tel = drive.telemetry()
     finally:
         board.close()
+    ranges = range_costs()
 
     print(f"flash {size['flash_bytes']} B ({size['flash_pct']:.1f} % of 256 KiB), "
           f"static RAM {size['static_ram_bytes']} B ({size['static_ram_pct']:.1f} % of 8 KiB; stack not included)")
@@ -219,13 +244,18 @@ def main() -> None:
     print("link loss (no command after the last one), simulated ms after its last byte:")
     for k, r in loss.items():
         print(f"  {k:5s} duty {r['duty']:4d}: ramp starts {r['ramp_start_ms']:6.1f}, all zero {r['zero_ms']:6.1f}")
+    print("range sensors (cycles per call, interrupts taken meanwhile included; an interrupt's 8-cycle response "
+          "and vector jump not included):")
+    for k, r in ranges.items():
+        print(f"  {k:12s} {r['calls_per_s']:6.0f} calls/s  min {r['min_cycles']:5d}  median {r['median_cycles']:6.0f}  "
+              f"max {r['max_cycles']:5d}  ({r['max_cycles'] / 16:.1f} us)  CPU {r['cpu_pct']:.2f} %")
     print(json.dumps({"bench": "firmware", **size,
                       "parser": parse,
                       "parser_worst_cycles_per_call": max(r["max_cycles_per_call"] for r in parse.values()),
                       "fw_max_parse_cycles": tel.max_parse_cycles, "fw_max_cmd_cycles": tel.max_cmd_cycles,
                       "latency_cycles": {k: perf[k] for k in ("SET_TWIST", "SET_HEADING", "STOP")},
                       "ik_max_err_counts": perf["ik_max_err_counts"], "ik_max_err_rad_s": perf["ik_max_err_rad_s"],
-                      "link_loss_ms": loss}))
+                      "link_loss_ms": loss, "ranges": ranges}))
 
 
 if __name__ == "__main__":

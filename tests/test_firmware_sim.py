@@ -3,9 +3,10 @@
 firmware/sim/simdrive runs the compiled firmware, bridges UART0 to a pseudo-terminal and
 prints the motor outputs (PWM compare registers + direction pins) with their simulated
 cycle; its ideal motor model feeds quadrature edges back, a virtual MPU-6050 answers on the
-I2C bus and the bumper pins follow the test's commands (on the harness's stdin). Expected
-values come from the Python kinematics (robot.kinematics), the protocol spec and the values
-the test injects, never from the firmware.
+I2C bus, and the bumper pins and the range sensors' analog inputs follow the test's commands
+(on the harness's stdin). Expected values come from the Python kinematics (robot.kinematics),
+the protocol spec, the sensors' data sheets and the values the test injects, never from the
+firmware.
 
 Timing is judged in simulated cycles, and waits are for simulated time (the harness's ENC
 reports every 50 ms), so a host slowed by CPU load cannot change a result.
@@ -15,6 +16,7 @@ from __future__ import annotations
 import math
 import re
 import shutil
+import struct
 import subprocess
 import threading
 import time
@@ -33,6 +35,7 @@ from robot.hardware.serial_drive import (
     SerialDriveConfig,
 )
 from robot.kinematics import OmniDriveParams, twist_to_wheels
+from robot.ranging import RangeLayout
 
 FW = Path(__file__).resolve().parents[1] / "firmware"
 ELF = FW / "build" / "drive.elf"
@@ -69,8 +72,8 @@ class PwmEvent:
 class SimBoard:
     """One simulated board: the harness process and its parsed stdout."""
 
-    def __init__(self, *args: str):
-        self.proc = subprocess.Popen([str(SIM), "--cpr", str(COUNTS_PER_REV), *args, str(ELF)], stdin=subprocess.PIPE,
+    def __init__(self, *args: str, elf: Path = ELF):
+        self.proc = subprocess.Popen([str(SIM), "--cpr", str(COUNTS_PER_REV), *args, str(elf)], stdin=subprocess.PIPE,
                                      stdout=subprocess.PIPE, stderr=subprocess.DEVNULL, text=True)
         first = self.proc.stdout.readline().split()
         assert first and first[0] == "PTY", f"harness did not start: {first} {self.proc.stderr.read()}"
@@ -78,7 +81,7 @@ class SimBoard:
         self.pwm: list[PwmEvent] = []
         self.enc: list[tuple[int, tuple[int, int, int]]] = []
         self.wdt: list[tuple[int, int]] = []
-        self.acks: list[list[str]] = []            # RXQUEUED / RXDONE / BUMP / GYRO lines
+        self.acks: list[list[str]] = []            # RXQUEUED / RXDONE / BUMP / GYRO / ADC lines
         self._reader = threading.Thread(target=self._read, daemon=True)
         self._reader.start()
 
@@ -93,7 +96,7 @@ class SimBoard:
                 self.enc.append((int(f[1]), tuple(int(x) for x in f[2:5])))
             elif f[:1] == ["WDT"]:
                 self.wdt.append((int(f[1]), int(f[2])))
-            elif f[:1] in (["RXQUEUED"], ["RXDONE"], ["BUMP"], ["GYRO"]):
+            elif f[:1] in (["RXQUEUED"], ["RXDONE"], ["BUMP"], ["GYRO"], ["ADC"]):
                 self.acks.append(f)
 
     def command(self, line: str, ack: str, timeout: float = 5.0) -> int:
@@ -188,7 +191,18 @@ def test_firmware_constants_match_python(built):
     assert val["STOP_DEADLINE_MS"] / 1000 == pytest.approx(P.STOP_DEADLINE_S)
     assert val["GYRO_LSB_PER_DPS_X10"] / 10 * 180 / math.pi == pytest.approx(P.GYRO_COUNTS_PER_RAD_S)
     assert val["ENC_WINDOW_MS"] / 1000 == pytest.approx(P.ENCODER_WINDOW_S)
+    assert val["RANGE_SENSORS"] == RangeLayout().n
+    rh = dict(re.findall(r"#define\s+(RANGE_\w+)\s+(\d+)u\b", (FW / "src" / "ranges.h").read_text()))
+    assert int(rh["RANGE_NO_RETURN"]) == P.RANGE_NO_RETURN
+    assert int(rh["RANGE_MIN_CM"]) == P.RANGE_MIN_CM == round(RangeLayout().min_range_m * 100)
+    assert int(rh["RANGE_MAX_CM"]) == P.RANGE_MAX_CM == round(RangeLayout().max_range_m * 100)
     proto = (FW / "src" / "protocol.h").read_text()
+    pv = {k: int(v, 0) for k, v in re.findall(r"#define\s+(\w+)\s+(0x[0-9A-Fa-f]+|\d+)u?\b", proto)}
+    assert pv["PROTO_VERSION"] == P.PROTOCOL_VERSION
+    assert pv["TELEMETRY_LEN"] == struct.calcsize(P.Telemetry.FORMAT)
+    assert pv["PONG_LEN"] == struct.calcsize(P.Pong.FORMAT)
+    assert pv["RANGE_SLOTS"] == P.RANGE_SLOTS
+    assert pv["SENSOR_GYRO_OK"] == P.Sensor.GYRO_OK and pv["SENSOR_RANGES_OK"] == P.Sensor.RANGES_OK
     for t in P.MsgType:
         assert re.search(rf"MSG_{t.name}\s*=\s*0x{t.value:02X}", proto), t.name
     for f_, name in P.FAULT_NAMES.items():
@@ -200,7 +214,8 @@ def test_ping_round_trip(board, drive):
     rtt = drive.ping(0x12345678)
     pong = drive.board
     assert pong.nonce == 0x12345678 and pong.protocol_version == P.PROTOCOL_VERSION
-    assert pong.firmware_version == 0x0200 and pong.pwm_top == P.PWM_TOP
+    assert pong.firmware_version == 0x0300 and pong.pwm_top == P.PWM_TOP
+    assert pong.range_sensors == RangeLayout().n
     assert rtt > 0
     # the MCU's millisecond clock (T0 configuration) keeps simulated time: compare with the harness's cycles
     board.wait_sim(1)
@@ -591,3 +606,129 @@ def test_gyro_unplugged_and_plugged_back_is_found_again(board, drive):
     t = drive.telemetry()
     assert t.gyro_ok and abs(t.gyro_z - _counts(1.25)) <= 1   # woken and set to +-500 deg/s again
     board.command("GYRO 0", "GYRO")
+
+
+# --------------------------------------------------------------------------- range sensors
+# Sharp GP2Y0A21YK0F data sheet, typical output vs distance (white paper, 90 % reflectance): 0.4 V at 80 cm and
+# 1.9 V more at 10 cm (electro-optical characteristics table); 20-70 cm read off its output-vs-distance figure.
+DATASHEET_V = {10: 2.30, 20: 1.30, 30: 0.90, 40: 0.75, 50: 0.60, 60: 0.50, 70: 0.45, 80: 0.40}
+ADC_LSB_V = 5.0 / 1024                                 # 10-bit ADC on the 5 V AVcc reference
+
+
+def sharp_volts(d_cm: float) -> float:
+    """Typical output at ``d_cm``: the data sheet's points, and between them linear in 1/(L + 0.42 cm), the
+    abscissa of the data sheet's inverse-distance figure (the firmware's table interpolates in 1/L)."""
+    d = np.array(sorted(DATASHEET_V), float)
+    x = 1.0 / (d + 0.42)
+    return float(np.interp(1.0 / (d_cm + 0.42), x[::-1], np.array([DATASHEET_V[k] for k in sorted(DATASHEET_V)])[::-1]))
+
+
+def range_tolerance_cm(d_cm: float) -> float:
+    """0.5 cm: the frame carries whole centimetres; 2 ADC steps times the curve's local cm per volt: the
+    ADC truncates (1 step) and simavr scales by 1023 / Vref where the chip uses 1024 (< 1 step below 5 V);
+    0.1 cm: interpolating in 1/L instead of 1/(L + 0.42) moves a reading by < 0.1 cm between the points."""
+    cm_per_v = 1.0 / (sharp_volts(d_cm - 0.5) - sharp_volts(d_cm + 0.5))
+    return 0.5 + 2 * ADC_LSB_V * cm_per_v + 0.1
+
+
+def _set_adc(board, millivolts, swings=None) -> int:
+    c = 0
+    for ch, mv in enumerate(millivolts):
+        c = board.command(f"ADC {ch} {mv:.0f} {swings[ch] if swings else 0:.0f}", "ADC")
+    return c
+
+
+def test_ranges_reach_status_in_sensor_order(board, drive):
+    """Each analog input driven with the data sheet's voltage for a known distance (a different one per
+    sensor, then rotated by three so no two rounds give an input the same value): SerialDrive.status()
+    returns those distances in metres, in RangeLayout's sensor order; below the 80 cm voltage (0.3 V, and an
+    unplugged 0 V input) is inf; above the 10 cm voltage (the fold-back peak near 7 cm) is clamped to 10 cm."""
+    assert drive.board.range_sensors == RangeLayout().n == 8
+    cases = [15.0, 30.0, 50.0, 70.0, "0.3 V", "0 V", 22.0, 43.0]
+    worst = 0.0
+    for shift in (0, 3):
+        want = cases[-shift:] + cases[:-shift] if shift else cases
+        if shift:
+            want[1] = "3.0 V"                          # in the dead zone: output above the 10 cm point
+        volts = [float(w.split()[0]) if isinstance(w, str) else sharp_volts(w) for w in want]
+        c = _set_adc(board, [1000 * v for v in volts])
+        board.wait_sim(c + int(0.12 * F_CPU))          # a whole 50 ms window after the change, converted
+        st = drive.status()
+        assert st.ranges is not None and len(st.ranges) == 8
+        RangeLayout().check(st.ranges)
+        for i, (w, got) in enumerate(zip(want, st.ranges)):
+            if w == "3.0 V":
+                assert got == pytest.approx(0.10), (i, got)
+            elif isinstance(w, str):
+                assert got == math.inf, (i, w, got)
+            else:
+                err = abs(got * 100 - w)
+                worst = max(worst, err / range_tolerance_cm(w))
+                assert err <= range_tolerance_cm(w), (i, w, got, range_tolerance_cm(w))
+    _set_adc(board, [0] * 8)
+    print(f"ranges: worst error {worst:.2f} of its tolerance")
+
+
+def test_ranges_are_the_distance_of_the_window_mean(board, drive):
+    """An input whose conversions alternate between V + s and V - s (the harness's ripple) reads as the
+    distance of the mean V, not as either level (a single sample or a median would) nor as the mean of
+    their two distances: the firmware averages each window's samples (25 per sensor in 50 ms) before
+    converting. With an odd count the mean keeps s / 25 of the ripple: added to the tolerance."""
+    cases = [(30.0, 400.0), (50.0, 200.0), (22.0, 300.0), (65.0, 40.0)]     # distance at the mean, swing (mV)
+    mv = [1000 * sharp_volts(d) for d, _ in cases] + [0.0] * 4
+    c = _set_adc(board, mv, [sw for _, sw in cases] + [0.0] * 4)
+    board.wait_sim(c + int(0.12 * F_CPU))
+    st = drive.status()
+    for (d, sw), got in zip(cases, st.ranges):
+        cm_per_v = 1.0 / (sharp_volts(d - 0.5) - sharp_volts(d + 0.5))
+        tol = range_tolerance_cm(d) + cm_per_v * sw / 1000 / 24
+        assert abs(got * 100 - d) <= tol, (d, sw, got, tol)
+    assert st.ranges[4:] == (math.inf,) * 4
+    _set_adc(board, [0] * 8)
+    # e.g. 30 cm: the two levels alone are 20 and 60 cm, their distances' mean 40 cm
+    print("ranges of rippled inputs:", [round(r * 100, 1) for r in st.ranges[:4]], "cm for", [d for d, _ in cases])
+
+
+def test_ranges_wait_for_the_sensors_power_up(built):
+    """The GP2Y0A21YK0F's first output is valid 38.3 + 9.6 + 5 ms after power-up (data sheet timing chart):
+    RANGES_OK only from the first 50 ms window that starts after that (100-150 ms), i.e. from 150 ms on."""
+    b = SimBoard()
+    try:
+        _set_adc(b, [1000 * sharp_volts(30.0)] * 8)    # 30 cm everywhere from the start
+        with SerialDrive(b.port, steady(keepalive=None)) as d:
+            seen = []
+            while not (t := d.telemetry()).ranges_ok:
+                seen.append(t.uptime_ms)
+                assert t.ranges_cm == (P.RANGE_NO_RETURN,) * P.RANGE_SLOTS
+                assert d.status().ranges is None
+                assert t.uptime_ms < 2000, "ranges never became valid"
+                time.sleep(0.01)
+            assert t.uptime_ms >= 150, t.uptime_ms
+            assert d.status().ranges == pytest.approx((0.30,) * 8, abs=range_tolerance_cm(30.0) / 100)
+    finally:
+        b.close()
+    print(f"ranges valid at {t.uptime_ms} ms after reset ({len(seen)} polls before, last at {seen[-1:]} ms)")
+
+
+def test_range_sensor_count_mismatch_is_refused(board, built):
+    four = RangeLayout(azimuths_rad=(0.0, math.pi / 2, math.pi, -math.pi / 2))
+    with pytest.raises(DriveLinkError, match=r"reads 8 range sensors.*range_layout expects 4"):
+        SerialDrive(board.port, steady(keepalive=None, range_layout=four))
+
+
+def test_board_without_range_sensors_reports_none(built, tmp_path):
+    """Firmware built with RANGE_SENSORS 0: PONG says none, the ADC stays off, status().ranges is None."""
+    r = subprocess.run(["make", "-C", str(FW), f"BUILD={tmp_path}", "EXTRA_CFLAGS=-DRANGE_SENSORS=0", "all"],
+                       capture_output=True, text=True, timeout=300)
+    assert r.returncode == 0, r.stdout + r.stderr
+    b = SimBoard(elf=tmp_path / "drive.elf")
+    try:
+        with SerialDrive(b.port, steady(keepalive=None)) as d:
+            assert d.board.range_sensors == 0
+            c = b.command("ADC 0 1300", "ADC")
+            b.wait_sim(c + int(0.2 * F_CPU))
+            t = d.telemetry()
+            assert not t.ranges_ok and t.ranges_cm == (P.RANGE_NO_RETURN,) * P.RANGE_SLOTS
+            assert d.status().ranges is None
+    finally:
+        b.close()

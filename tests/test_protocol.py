@@ -11,6 +11,7 @@ import struct
 import threading
 import time
 import tty
+from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -25,6 +26,7 @@ from robot.hardware.serial_drive import (
     SerialDrive,
     SerialDriveConfig,
 )
+from robot.ranging import RangeLayout
 
 SETTINGS = settings(derandomize=True, max_examples=150, deadline=None,
                     suppress_health_check=[HealthCheck.too_slow])
@@ -57,8 +59,9 @@ def test_crc_matches_bitwise_reference():
 EXAMPLES = [
     P.Ping(0xDEADBEEF), P.SetTwist(-500, 250, 1571), P.SetHeading(-3142, 300, -100), P.Stop(),
     P.GetTelemetry(), P.ClearFaults(int(P.Fault.WDT_RESET)), P.Ack(P.MsgType.SET_TWIST, P.ACK_SPEED_LIMITED),
-    P.Nak(0x42, P.NakReason.UNKNOWN_TYPE), P.Pong(7, 1, 0x0102, 123456, 400),
-    P.Telemetry(99, (-2**31, 0, 2**31 - 1), (-5, 0, 5), (-400, 0, 400), 0x41, *range(1, 11)),
+    P.Nak(0x42, P.NakReason.UNKNOWN_TYPE), P.Pong(7, 1, 0x0102, 123456, 400, 8),
+    P.Telemetry(99, (-2**31, 0, 2**31 - 1), (-5, 0, 5), (-400, 0, 400), 0x41, *range(1, 11), -7, 3, 0x21,
+                (0, 10, 80, 255, 33, 0, 47, 12)),
 ]
 
 
@@ -228,6 +231,7 @@ class FakeMCU(threading.Thread):
         self.stale_first = False        # send a reply with a wrong seq before the right one
         self.foreign_nak_first = False  # send a NAK for another message type with the same seq first
         self.version = P.PROTOCOL_VERSION
+        self.range_sensors = 0          # PONG: range sensors fitted
         self.arrived: list[float] = []  # monotonic arrival time of each received frame
         self.telemetry = P.Telemetry()
         self.running = True
@@ -264,7 +268,7 @@ class FakeMCU(threading.Thread):
             self.drop_next -= 1
             return None
         if isinstance(msg, P.Ping):
-            return self.reply(P.Pong(msg.nonce, self.version, 0x0200, 5, 400), fr.seq)
+            return self.reply(P.Pong(msg.nonce, self.version, 0x0200, 5, 400, self.range_sensors), fr.seq)
         if isinstance(msg, P.GetTelemetry):
             return self.reply(self.telemetry, fr.seq)
         if isinstance(msg, P.SetHeading) and abs(msg.azimuth_mrad) > P.AZIMUTH_LIMIT_MRAD:
@@ -455,3 +459,50 @@ def test_status_reports_bumpers_and_yaw_rate(fake):
         fake.telemetry = P.Telemetry()
         assert drive.status().bumper                                    # ... does not lose it
         assert not drive.status().bumper
+
+
+def test_payload_sizes_of_protocol_version_3():
+    """Version 3: TELEMETRY grew by one u8 per range sensor slot (54 -> 62 bytes), PONG by range_sensors."""
+    assert P.PROTOCOL_VERSION == 3
+    assert struct.calcsize(P.Telemetry.FORMAT) == 54 + P.RANGE_SLOTS == 62 <= P.MAX_PAYLOAD
+    assert struct.calcsize(P.Pong.FORMAT) == 14
+    t = P.Telemetry(ranges_cm=(0, 10, 80, 33, 0, 0, 0, 0), sensors=int(P.Sensor.RANGES_OK))
+    assert t.pack()[54:] == bytes([0, 10, 80, 33, 0, 0, 0, 0])      # after bumpers, slot order = ADC order
+    assert t.ranges_ok and not t.gyro_ok
+    assert t.ranges_m == (math.inf, 0.10, 0.80, 0.33, math.inf, math.inf, math.inf, math.inf)
+    with pytest.raises(ValueError, match="ranges_cm"):
+        P.Telemetry(ranges_cm=(10,) * 7)
+    with pytest.raises(ValueError, match="ranges_cm"):
+        P.Telemetry(ranges_cm=(10,) * 7 + (300,))
+
+
+def test_status_reports_ranges_of_the_layout(fake):
+    fake.range_sensors = 8
+    with SerialDrive(fake.path, FAST) as drive:
+        assert drive.board.range_sensors == 8
+        assert drive.status().ranges is None                              # no complete window yet
+        fake.telemetry = P.Telemetry(ranges_cm=(10, 0, 25, 80, 0, 41, 0, 12), sensors=int(P.Sensor.RANGES_OK))
+        r = drive.status().ranges
+        assert r == (0.10, math.inf, 0.25, 0.80, math.inf, 0.41, math.inf, 0.12)
+        RangeLayout().check(r)                                            # what the HAL promises
+
+
+def test_board_without_range_sensors_reports_none(fake):
+    fake.telemetry = P.Telemetry(sensors=int(P.Sensor.GYRO_OK))
+    with SerialDrive(fake.path, FAST) as drive:                           # PONG range_sensors 0
+        assert drive.status().ranges is None
+    with SerialDrive(fake.path, replace(FAST, range_layout=None)) as drive:
+        assert drive.status().ranges is None
+
+
+def test_range_sensor_count_mismatch_is_refused_naming_the_field(fake):
+    fake.range_sensors = 8
+    four = RangeLayout(azimuths_rad=(0.0, math.pi / 2, math.pi, -math.pi / 2))
+    with pytest.raises(DriveProtocolError, match=r"reads 8 range sensors.*range_layout expects 4"):
+        SerialDrive(fake.path, replace(FAST, range_layout=four))
+    with pytest.raises(DriveProtocolError, match=r"range_layout expects none"):
+        SerialDrive(fake.path, replace(FAST, range_layout=None))
+    with pytest.raises(ValueError, match="range_layout must have at most 8"):
+        SerialDriveConfig(range_layout=RangeLayout(azimuths_rad=tuple(k * 0.5 for k in range(9))))
+    with pytest.raises(ValueError, match="range_layout must be a robot.ranging.RangeLayout"):
+        SerialDriveConfig(range_layout=8)

@@ -34,6 +34,11 @@
  *                             with ms, release them after that much simulated time
  *        GYRO <rad/s>         the gyro's true Z rate (the test adds any bias it wants)
  *        GYRO unplug | plug   the chip stops answering / is plugged in again (powered up afresh)
+ *        ADC <ch> <mV> [<swing mV>]
+ *                             the voltage on analog input ADC<ch> (PF<ch>, Mega A<ch>), 0..7, in
+ *                             millivolts (AVcc = AREF = 5000 mV); all start at 0 V. With a swing,
+ *                             successive conversions of that input see mV + swing and mV - swing
+ *                             in turn (a ripple only an average over the samples removes)
  *
  * usage: simdrive [--stall WHEEL] [--speed X] [--duration S] [--cpr N] [--max-speed RADS]
  *                 [--pwm-top N] [--profile ADDR] [--no-gyro] firmware.elf
@@ -52,6 +57,7 @@
 #include <time.h>
 #include <unistd.h>
 
+#include "avr_adc.h"
 #include "avr_ioport.h"
 #include "avr_twi.h"
 #include "avr_uart.h"
@@ -72,6 +78,7 @@ DEFINE_FIFO(uint16_t, uart_fifo);                /* the header only declares the
 #define SYNC_CYCLES 800          /* 50 us: pty pumping, throttling, motor model step */
 #define ENC_REPORT_CYCLES (F_SIM / 20)
 #define MAX_LAG_S 0.002          /* lag beyond this is given up, never caught up */
+#define SUPPLY_MV 5000           /* VCC = AVCC = AREF: the Mega's regulated 5 V */
 
 static avr_t *avr;
 static avr_uart_t *uart0;
@@ -163,6 +170,28 @@ static void set_bumpers(uint8_t pressed)
         avr_raise_irq(bump_irq[i], (pressed >> i) & 1 ? 0 : 1);
 }
 
+/* analog inputs: value (mV) and ripple per channel, applied at the start of each conversion */
+static avr_irq_t *adc_irq;
+static double adc_mv[8], adc_swing[8];
+static uint8_t adc_phase[8];
+
+static void set_adc_input(int ch)
+{
+    double mv = adc_mv[ch] + (adc_phase[ch] ? -adc_swing[ch] : adc_swing[ch]);
+    mv = mv < 0 ? 0 : mv > SUPPLY_MV ? SUPPLY_MV : mv;
+    avr_raise_irq(adc_irq + ADC_IRQ_ADC0 + ch, (uint32_t)lround(mv));
+}
+
+static void adc_start_hook(struct avr_irq_t *irq, uint32_t value, void *param)
+{
+    (void)irq; (void)param;
+    union { avr_adc_mux_t mux; uint32_t v; } e = {.v = value};
+    if (e.mux.kind == ADC_MUX_SINGLE && e.mux.src < 8 && adc_swing[e.mux.src] > 0) {
+        adc_phase[e.mux.src] ^= 1;
+        set_adc_input(e.mux.src);
+    }
+}
+
 static void run_command(char *line)
 {
     char *arg = strchr(line, ' ');
@@ -191,6 +220,19 @@ static void run_command(char *line)
         else
             gyro_part_set_rate(atof(arg));
         printf("GYRO %llu %s\n", (unsigned long long)avr->cycle, arg);
+    } else if (!strcmp(line, "ADC") && arg) {
+        int ch = -1;
+        double mv = -1, swing = 0;
+        if (sscanf(arg, "%d %lf %lf", &ch, &mv, &swing) >= 2 && ch >= 0 && ch < 8 && mv >= 0 && mv <= SUPPLY_MV
+            && swing >= 0) {
+            adc_mv[ch] = mv;
+            adc_swing[ch] = swing;
+            set_adc_input(ch);
+            printf("ADC %llu %d %.0f %.0f\n", (unsigned long long)avr->cycle, ch, mv, swing);
+        } else {
+            fprintf(stderr, "simdrive: ADC expects <channel 0..7> <millivolts 0..%d> [<swing mV>], got %s\n",
+                    SUPPLY_MV, arg);
+        }
     } else {
         fprintf(stderr, "simdrive: unknown command %s\n", line);
     }
@@ -325,6 +367,7 @@ int main(int argc, char **argv)
     }
     avr_init(avr);
     avr_load_firmware(avr, &fw);
+    avr->vcc = avr->avcc = avr->aref = SUPPLY_MV;      /* simavr's ADC scales readings by these (mV) */
     avr->sleep = no_sleep;                       /* we throttle against the wall clock ourselves */
     /* simavr advances a sleeping core to its next cycle timer *before* servicing the interrupt
      * that should wake it, which would delay wake-ups by up to a tick period (1 ms here) and
@@ -359,6 +402,10 @@ int main(int argc, char **argv)
     set_bumpers(0);
     if (with_gyro)
         gyro_part_attach(avr, AVR_IOCTL_TWI_GETIRQ(0));
+    adc_irq = avr_io_getirq(avr, AVR_IOCTL_ADC_GETIRQ, 0);
+    avr_irq_register_notify(adc_irq + ADC_IRQ_OUT_TRIGGER, adc_start_hook, NULL);
+    for (int ch = 0; ch < 8; ch++)
+        set_adc_input(ch);
     fcntl(STDIN_FILENO, F_SETFL, fcntl(STDIN_FILENO, F_GETFL) | O_NONBLOCK);
 
     int slave;

@@ -10,7 +10,7 @@
 #define F_CPU 16000000UL
 #endif
 
-#define FW_VERSION          0x0200u   /* major << 8 | minor */
+#define FW_VERSION          0x0300u   /* major << 8 | minor */
 #define UART_BAUD           115200UL  /* 8N1, U2X: UBRR 16 -> 117647 Bd (+2.1 %, same as the Mega's USB bridge) */
 
 /* --- kinematics (robot.kinematics.OmniDriveParams) --- */
@@ -44,6 +44,15 @@
 #define GYRO_BUS_TIMEOUT_MS 3u        /* a transaction takes ~0.15 ms at 400 kHz; longer = hung bus */
 #define GYRO_RETRY_MS       1000u     /* re-probe a missing or failed gyro this often */
 #define BUMPER_DEBOUNCE_MS  5u        /* a switch level must hold this long (contact bounce) */
+/* Infrared range sensors (Sharp GP2Y0A21YK0F, 10-80 cm) on ADC0..ADC(RANGE_SENSORS-1): as many as
+ * robot.ranging.RangeLayout has (the host checks the count in PONG); 0 = none, ADC left off.
+ * Override at build time: make EXTRA_CFLAGS=-DRANGE_SENSORS=0 */
+#ifndef RANGE_SENSORS
+#define RANGE_SENSORS       8u
+#endif
+#define RANGE_SAMPLE_MS     2u        /* one sweep of all sensors this often ... */
+#define RANGE_WINDOW_MS     50u       /* ... averaged over this window (25 samples per sensor) */
+#define RANGE_WARMUP_MS     53u       /* data sheet timing chart: first output valid after 38.3 + 9.6 + 5 ms */
 
 /* --- encoders --- */
 #define ENC_WINDOW_MS       50u       /* telemetry encoder_rate window */

@@ -2,7 +2,8 @@
  * from the host over UART0 (docs/protocol.md), drives three omni wheels through
  * H-bridges (PWM + direction) and reports wheel encoders and faults.
  *
- * Also reads an MPU-6050-class I2C gyro (yaw rate) and up to four bumper switches.
+ * Also reads an MPU-6050-class I2C gyro (yaw rate), up to four bumper switches and up to
+ * eight analog infrared range sensors (ADC).
  *
  * Timers: T0 1 kHz tick, T1 free-running cycle counter (profiling), T4 motor PWM. */
 #include "bumpers.h"
@@ -11,6 +12,7 @@
 #include "gyro.h"
 #include "link.h"
 #include "protocol.h"
+#include "ranges.h"
 
 #include <avr/interrupt.h>
 #include <avr/io.h>
@@ -102,8 +104,10 @@ static void send_telemetry(uint8_t seq)
     for (uint8_t i = 0; i < 10; i++)
         put_u16(p + 30 + 2 * i, counters[i]);
     put_u16(p + 50, (uint16_t)gyro_rate());
-    p[52] = gyro_ok() ? SENSOR_GYRO_OK : 0;
+    p[52] = (uint8_t)((gyro_ok() ? SENSOR_GYRO_OK : 0) | (ranges_ok() ? SENSOR_RANGES_OK : 0));
     p[53] = (uint8_t)(bumpers_now() | (uint8_t)(bumpers_take_pressed() << 4));
+    for (uint8_t i = 0; i < RANGE_SLOTS; i++)
+        p[54 + i] = ranges_cm(i);
     link_send(MSG_TELEMETRY, seq, p, TELEMETRY_LEN);
 }
 
@@ -126,6 +130,7 @@ static void dispatch(const frame_t *f)
         put_u16(p + 5, FW_VERSION);
         put_u32(p + 7, uptime());
         put_u16(p + 11, PWM_TOP);
+        p[13] = RANGE_SENSORS;
         link_send(MSG_PONG, f->seq, p, PONG_LEN);
         return;
     }
@@ -181,6 +186,7 @@ int main(void)
     link_init();
     bumpers_init();
     gyro_init();
+    ranges_init();
     /* T0: CTC, /64, OCR0A 249 -> 1 kHz */
     TCCR0A = _BV(WGM01);
     TCCR0B = _BV(CS01) | _BV(CS00);
@@ -203,6 +209,7 @@ int main(void)
             drive_tick(++done_ms);
             bumpers_tick();
             gyro_tick(done_ms);
+            ranges_tick(done_ms);
         }
         if (link_rx_overflowed())
             latched_faults |= FAULT_RX_OVERFLOW;
@@ -225,13 +232,16 @@ int main(void)
                 max_cmd_cycles = dt;
         }
 
-        /* sleep until the next interrupt unless there is work; sei; sleep is atomic */
+        /* sleep until there is work (a received byte or a tick); an interrupt that brings
+         * neither (ADC conversions, encoder edges, I2C, transmit) sleeps again at once
+         * instead of running the loop; sei; sleep is atomic */
         cli();
-        if (!link_rx_new() && g_ms == done_ms) {
+        while (!link_rx_new() && g_ms == done_ms) {
             sleep_enable();
             sei();
             sleep_cpu();
             sleep_disable();
+            cli();
         }
         sei();
     }

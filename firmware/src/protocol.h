@@ -5,7 +5,7 @@
 #include <stdint.h>
 
 #define PROTO_SOF            0xA5u
-#define PROTO_VERSION        2u
+#define PROTO_VERSION        3u
 #define PROTO_HEADER_LEN     4u      /* SOF LEN TYPE SEQ */
 #define PROTO_CRC_LEN        2u
 #define PROTO_MCU_MAX_PAYLOAD 16u    /* commands are short; larger LEN is a length error */
@@ -27,10 +27,12 @@ enum fault_bits {
 #define ACK_SPEED_LIMITED    0x01u
 #define AZIMUTH_LIMIT_MRAD   3142
 
-#define TELEMETRY_LEN        54u
+#define TELEMETRY_LEN        62u
+#define RANGE_SLOTS          8u      /* TELEMETRY ranges_cm: one u8 per sensor slot (ADC0..ADC7) */
 
 #define SENSOR_GYRO_OK       0x01u   /* TELEMETRY sensors: the gyro answers and its rate is valid */
-#define PONG_LEN             13u
+#define SENSOR_RANGES_OK     0x02u   /* TELEMETRY sensors: range sensors fitted and ranges_cm valid */
+#define PONG_LEN             14u
 
 typedef struct {
     uint8_t type;

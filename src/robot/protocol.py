@@ -28,7 +28,7 @@ HEADER_LEN = 4             # SOF, LEN, TYPE, SEQ
 CRC_LEN = 2
 MAX_PAYLOAD = 64           # largest LEN any receiver accepts (the MCU accepts at most MCU_MAX_PAYLOAD)
 MCU_MAX_PAYLOAD = 16       # the MCU's commands are short: it rejects larger LEN at once (limits resync stalls)
-PROTOCOL_VERSION = 2       # 2: TELEMETRY carries gyro_z, sensors, bumpers; watchdog ramp ends by 300 ms
+PROTOCOL_VERSION = 3       # 3: TELEMETRY carries ranges_cm, PONG range_sensors; 2: gyro_z, sensors, bumpers
 PWM_TOP = 400              # firmware duty counts for 100 % (reported in PONG too)
 ENCODER_WINDOW_S = 0.050   # telemetry ``encoder_rate`` = counts in the last 50 ms window
 COMMAND_TIMEOUT_S = 0.200  # the MCU starts ramping the motors down this long after the last motion command ...
@@ -92,10 +92,17 @@ class Sensor(IntFlag):
 
     NONE = 0
     GYRO_OK = 1 << 0          # a gyro answered WHO_AM_I and ``gyro_z`` is valid
+    RANGES_OK = 1 << 1        # range sensors are fitted and ``ranges_cm`` holds a complete window
 
 
 BUMPERS_LIVE = 0x0F           # TELEMETRY ``bumpers``: bits 0-3 pressed now (debounced), PC0..PC3
 BUMPERS_PRESSED_SHIFT = 4     # bits 4-7: pressed at any time since the previous TELEMETRY
+# TELEMETRY ``ranges_cm``: one slot per analog input ADC0..ADC7 (PONG ``range_sensors`` says how many are fitted),
+# the distance in cm from the sensor along its ray (RANGE_MIN_CM..RANGE_MAX_CM), or RANGE_NO_RETURN
+RANGE_SLOTS = 8
+RANGE_NO_RETURN = 0           # nothing within RANGE_MAX_CM
+RANGE_MIN_CM = 10             # Sharp GP2Y0A21YK0F: 10 cm ... (closer readings are clamped to it by the firmware)
+RANGE_MAX_CM = 80             # ... to 80 cm
 
 
 FAULT_NAMES: dict[Fault, str] = {
@@ -229,12 +236,13 @@ class Nak(Message):
 @dataclass(frozen=True)
 class Pong(Message):
     TYPE: ClassVar[MsgType] = MsgType.PONG
-    FORMAT: ClassVar[str] = "<IBHIH"
+    FORMAT: ClassVar[str] = "<IBHIHB"
     nonce: int = 0
     protocol_version: int = PROTOCOL_VERSION
     firmware_version: int = 0      # major << 8 | minor
     uptime_ms: int = 0
     pwm_top: int = PWM_TOP
+    range_sensors: int = 0         # range sensors fitted, on ADC0..ADC(n-1) (firmware config.h RANGE_SENSORS)
 
 
 @dataclass(frozen=True)
@@ -243,8 +251,8 @@ class Telemetry(Message):
     ``ENCODER_WINDOW_S``, ``duty`` applied signed duty in counts of ``PWM_TOP``; counters wrap at 2**16."""
 
     TYPE: ClassVar[MsgType] = MsgType.TELEMETRY
-    FORMAT: ClassVar[str] = "<I" + "iii" + "hhh" + "hhh" + "H" + "H" * 10 + "hBB"
-    ARITY: ClassVar[dict[str, int]] = {"encoder_counts": 3, "encoder_rate": 3, "duty": 3}
+    FORMAT: ClassVar[str] = "<I" + "iii" + "hhh" + "hhh" + "H" + "H" * 10 + "hBB" + "B" * RANGE_SLOTS
+    ARITY: ClassVar[dict[str, int]] = {"encoder_counts": 3, "encoder_rate": 3, "duty": 3, "ranges_cm": RANGE_SLOTS}
     uptime_ms: int = 0
     encoder_counts: tuple[int, int, int] = (0, 0, 0)
     encoder_rate: tuple[int, int, int] = (0, 0, 0)
@@ -263,6 +271,7 @@ class Telemetry(Message):
     gyro_z: int = 0             # mean gyro Z rate over the last 50 ms, counts (GYRO_COUNTS_PER_RAD_S), bias included
     sensors: int = 0            # Sensor bits
     bumpers: int = 0            # bits 0-3 pressed now, bits 4-7 pressed since the previous TELEMETRY
+    ranges_cm: tuple[int, ...] = (RANGE_NO_RETURN,) * RANGE_SLOTS   # per ADC input: cm, or RANGE_NO_RETURN
 
     @property
     def fault_flags(self) -> Fault:
@@ -271,6 +280,15 @@ class Telemetry(Message):
     @property
     def gyro_ok(self) -> bool:
         return bool(self.sensors & Sensor.GYRO_OK)
+
+    @property
+    def ranges_ok(self) -> bool:
+        return bool(self.sensors & Sensor.RANGES_OK)
+
+    @property
+    def ranges_m(self) -> tuple[float, ...]:
+        """``ranges_cm`` in metres per slot, ``math.inf`` for RANGE_NO_RETURN (valid only if ``ranges_ok``)."""
+        return tuple(math.inf if c == RANGE_NO_RETURN else c / 100.0 for c in self.ranges_cm)
 
     @property
     def bumpers_pressed(self) -> int:

@@ -19,9 +19,11 @@ hangs, the firmware's watchdog stops it). The port is opened exclusively (POSIX
 Replies are matched on type *and* sequence number: an ACK/NAK must name the command's
 type, so a late reply to another command that reused the sequence number is skipped.
 
-``status`` reports the bumper switches (pressed now or since the last status) and the
-gyro's yaw rate in rad/s with its zero-rate bias removed; the bias is learned from the
-TELEMETRY read while the robot stands still (all duties zero, no encoder counts).
+``status`` reports the bumper switches (pressed now or since the last status), the
+gyro's yaw rate in rad/s with its zero-rate bias removed (the bias is learned from the
+TELEMETRY read while the robot stands still: all duties zero, no encoder counts), and the
+infrared range sensors' distances in metres (``robot.ranging``; the PONG says how many the
+firmware reads, which must be ``config.range_layout.n``).
 """
 from __future__ import annotations
 
@@ -39,6 +41,7 @@ import serial
 from robot import protocol as P
 from robot.hal import DriveBase, DriveStatus, WheelOdometry
 from robot.kinematics import OmniDriveParams
+from robot.ranging import RangeLayout
 
 try:                     # termios.error is what pyserial leaks when a pty/USB device vanishes
     from termios import error as _TermiosError
@@ -83,6 +86,9 @@ class SerialDriveConfig:
     gyro_bias_gain: float = 0.1         # EMA gain of the gyro bias estimate per stationary TELEMETRY read
     connect_timeout: float | None = 3.0 # s to wait for the first PONG (an Arduino Mega resets on open); None = skip
     params: OmniDriveParams = field(default_factory=OmniDriveParams)
+    # the range sensors on the board, sensor i on analog input ADCi; None: none expected (a board that reports
+    # some is refused, as is one reporting a count other than range_layout.n; a board without any is fine)
+    range_layout: RangeLayout | None = field(default_factory=RangeLayout)
 
     def __post_init__(self) -> None:
         if not self.reply_timeout > 0:
@@ -97,6 +103,11 @@ class SerialDriveConfig:
             raise ValueError(f"command_deadline must be > keepalive ({self.keepalive} s), got {self.command_deadline}")
         if not 0 < self.gyro_bias_gain <= 1:
             raise ValueError(f"gyro_bias_gain must be in (0, 1], got {self.gyro_bias_gain}")
+        if self.range_layout is not None and not isinstance(self.range_layout, RangeLayout):
+            raise ValueError(f"range_layout must be a robot.ranging.RangeLayout or None, got {self.range_layout!r}")
+        if self.range_layout is not None and self.range_layout.n > P.RANGE_SLOTS:
+            raise ValueError(f"range_layout must have at most {P.RANGE_SLOTS} sensors (the firmware's analog "
+                             f"inputs ADC0..ADC7), got {self.range_layout.n}")
 
 
 @dataclass
@@ -192,15 +203,24 @@ class SerialDrive(DriveBase):
                              wheel_speeds=np.asarray(t.encoder_rate, dtype=float) * (k / P.ENCODER_WINDOW_S))
 
     def status(self) -> DriveStatus:
-        """Faults, stall, bumpers (pressed now or since the last TELEMETRY) and the yaw rate (rad/s, CCW
-        positive about the robot's +z; gyro bias removed once learned; None without a working gyro)."""
+        """Faults, stall, bumpers (pressed now or since the last TELEMETRY), the yaw rate (rad/s, CCW
+        positive about the robot's +z; gyro bias removed once learned; None without a working gyro) and the
+        ranges (m per sensor of ``config.range_layout``, ``inf`` = nothing within 0.8 m; the firmware's 50 ms
+        window mean; None on a board without range sensors or before its first complete window)."""
         t = self.telemetry()
         f = t.fault_flags
         names = tuple(n for bit, n in P.FAULT_NAMES.items()
                       if f & bit and bit not in (P.Fault.SPEED_LIMITED, P.Fault.STALL))
         yaw_rate = t.gyro_z / P.GYRO_COUNTS_PER_RAD_S - (self.gyro_bias or 0.0) if t.gyro_ok else None
         bumped, self._bumped = self._bumped, 0
-        return DriveStatus(bumper=bool(bumped), stalled=bool(f & P.Fault.STALL), faults=names, yaw_rate=yaw_rate)
+        ranges = None
+        if t.ranges_ok:
+            if self.board is None:          # not pinged yet (connect_timeout None): the PONG says how many
+                self.ping()
+            n = self.board.range_sensors
+            ranges = t.ranges_m[:n] if n else None
+        return DriveStatus(bumper=bool(bumped), stalled=bool(f & P.Fault.STALL), faults=names, yaw_rate=yaw_rate,
+                           ranges=ranges)
 
     def close(self) -> None:
         if self._closed.is_set():
@@ -228,8 +248,21 @@ class SerialDrive(DriveBase):
         if pong.protocol_version != P.PROTOCOL_VERSION:
             raise DriveProtocolError(f"drive on {self.port!r} speaks protocol version {pong.protocol_version}, this "
                                      f"host speaks {P.PROTOCOL_VERSION}: flash firmware/ (make -C firmware flash)")
+        self._check_ranges(pong.range_sensors)
         self.board = pong
         return rtt
+
+    def _check_ranges(self, n: int) -> None:
+        """The firmware reads ``n`` range sensors: ``config.range_layout`` must describe that many."""
+        layout = self.config.range_layout
+        if n > P.RANGE_SLOTS:
+            raise DriveProtocolError(f"drive on {self.port!r} reports range_sensors={n}, the protocol has "
+                                     f"{P.RANGE_SLOTS} slots")
+        if n and (layout is None or layout.n != n):
+            want = "none (range_layout=None)" if layout is None else f"{layout.n} (range_layout.n)"
+            raise DriveProtocolError(f"drive on {self.port!r} reads {n} range sensors, SerialDriveConfig."
+                                     f"range_layout expects {want}: give range_layout a RangeLayout of {n} "
+                                     f"sensors, or build the firmware with RANGE_SENSORS matching it")
 
     def telemetry(self) -> P.Telemetry:
         t = self._transact(P.GetTelemetry(), P.MsgType.TELEMETRY)
