@@ -643,8 +643,8 @@ def test_ranges_reach_status_in_sensor_order(board, drive):
     sensor, then rotated by three so no two rounds give an input the same value): SerialDrive.status()
     returns those distances in metres, in RangeLayout's sensor order; below the 80 cm voltage (0.3 V, and an
     unplugged 0 V input) is inf; above the 10 cm voltage (the fold-back peak near 7 cm) is clamped to 10 cm."""
-    assert drive.board.range_sensors == RangeLayout().n == 8
-    cases = [15.0, 30.0, 50.0, 70.0, "0.3 V", "0 V", 22.0, 43.0]
+    assert drive.board.range_sensors == RangeLayout().n == 9
+    cases = [15.0, 30.0, 50.0, 70.0, "0.3 V", "0 V", 22.0, 43.0, 61.0]
     worst = 0.0
     for shift in (0, 3):
         want = cases[-shift:] + cases[:-shift] if shift else cases
@@ -654,7 +654,7 @@ def test_ranges_reach_status_in_sensor_order(board, drive):
         c = _set_adc(board, [1000 * v for v in volts])
         board.wait_sim(c + int(0.12 * F_CPU))          # a whole 50 ms window after the change, converted
         st = drive.status()
-        assert st.ranges is not None and len(st.ranges) == 8
+        assert st.ranges is not None and len(st.ranges) == 9
         RangeLayout().check(st.ranges)
         for i, (w, got) in enumerate(zip(want, st.ranges)):
             if w == "3.0 V":
@@ -665,7 +665,7 @@ def test_ranges_reach_status_in_sensor_order(board, drive):
                 err = abs(got * 100 - w)
                 worst = max(worst, err / range_tolerance_cm(w))
                 assert err <= range_tolerance_cm(w), (i, w, got, range_tolerance_cm(w))
-    _set_adc(board, [0] * 8)
+    _set_adc(board, [0] * 9)
     print(f"ranges: worst error {worst:.2f} of its tolerance")
 
 
@@ -675,16 +675,16 @@ def test_ranges_are_the_distance_of_the_window_mean(board, drive):
     their two distances: the firmware averages each window's samples (25 per sensor in 50 ms) before
     converting. With an odd count the mean keeps s / 25 of the ripple: added to the tolerance."""
     cases = [(30.0, 400.0), (50.0, 200.0), (22.0, 300.0), (65.0, 40.0)]     # distance at the mean, swing (mV)
-    mv = [1000 * sharp_volts(d) for d, _ in cases] + [0.0] * 4
-    c = _set_adc(board, mv, [sw for _, sw in cases] + [0.0] * 4)
+    mv = [1000 * sharp_volts(d) for d, _ in cases] + [0.0] * 5
+    c = _set_adc(board, mv, [sw for _, sw in cases] + [0.0] * 5)
     board.wait_sim(c + int(0.12 * F_CPU))
     st = drive.status()
     for (d, sw), got in zip(cases, st.ranges):
         cm_per_v = 1.0 / (sharp_volts(d - 0.5) - sharp_volts(d + 0.5))
         tol = range_tolerance_cm(d) + cm_per_v * sw / 1000 / 24
         assert abs(got * 100 - d) <= tol, (d, sw, got, tol)
-    assert st.ranges[4:] == (math.inf,) * 4
-    _set_adc(board, [0] * 8)
+    assert st.ranges[4:] == (math.inf,) * 5
+    _set_adc(board, [0] * 9)
     # e.g. 30 cm: the two levels alone are 20 and 60 cm, their distances' mean 40 cm
     print("ranges of rippled inputs:", [round(r * 100, 1) for r in st.ranges[:4]], "cm for", [d for d, _ in cases])
 
@@ -694,7 +694,7 @@ def test_ranges_wait_for_the_sensors_power_up(built):
     RANGES_OK only from the first 50 ms window that starts after that (100-150 ms), i.e. from 150 ms on."""
     b = SimBoard()
     try:
-        _set_adc(b, [1000 * sharp_volts(30.0)] * 8)    # 30 cm everywhere from the start
+        _set_adc(b, [1000 * sharp_volts(30.0)] * 9)    # 30 cm everywhere from the start
         with SerialDrive(b.port, steady(keepalive=None)) as d:
             seen = []
             while not (t := d.telemetry()).ranges_ok:
@@ -704,7 +704,7 @@ def test_ranges_wait_for_the_sensors_power_up(built):
                 assert t.uptime_ms < 2000, "ranges never became valid"
                 time.sleep(0.01)
             assert t.uptime_ms >= 150, t.uptime_ms
-            assert d.status().ranges == pytest.approx((0.30,) * 8, abs=range_tolerance_cm(30.0) / 100)
+            assert d.status().ranges == pytest.approx((0.30,) * 9, abs=range_tolerance_cm(30.0) / 100)
     finally:
         b.close()
     print(f"ranges valid at {t.uptime_ms} ms after reset ({len(seen)} polls before, last at {seen[-1:]} ms)")
@@ -712,7 +712,7 @@ def test_ranges_wait_for_the_sensors_power_up(built):
 
 def test_range_sensor_count_mismatch_is_refused(board, built):
     four = RangeLayout(azimuths_rad=(0.0, math.pi / 2, math.pi, -math.pi / 2))
-    with pytest.raises(DriveLinkError, match=r"reads 8 range sensors.*range_layout expects 4"):
+    with pytest.raises(DriveLinkError, match=r"reads 9 range sensors.*range_layout expects 4"):
         SerialDrive(board.port, steady(keepalive=None, range_layout=four))
 
 

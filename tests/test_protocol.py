@@ -59,9 +59,9 @@ def test_crc_matches_bitwise_reference():
 EXAMPLES = [
     P.Ping(0xDEADBEEF), P.SetTwist(-500, 250, 1571), P.SetHeading(-3142, 300, -100), P.Stop(),
     P.GetTelemetry(), P.ClearFaults(int(P.Fault.WDT_RESET)), P.Ack(P.MsgType.SET_TWIST, P.ACK_SPEED_LIMITED),
-    P.Nak(0x42, P.NakReason.UNKNOWN_TYPE), P.Pong(7, 1, 0x0102, 123456, 400, 8),
+    P.Nak(0x42, P.NakReason.UNKNOWN_TYPE), P.Pong(7, 1, 0x0102, 123456, 400, 9),
     P.Telemetry(99, (-2**31, 0, 2**31 - 1), (-5, 0, 5), (-400, 0, 400), 0x41, *range(1, 11), -7, 3, 0x21,
-                (0, 10, 80, 255, 33, 0, 47, 12)),
+                (0, 10, 80, 255, 33, 0, 47, 12, 61)),
 ]
 
 
@@ -462,28 +462,28 @@ def test_status_reports_bumpers_and_yaw_rate(fake):
 
 
 def test_payload_sizes_of_protocol_version_3():
-    """Version 3: TELEMETRY grew by one u8 per range sensor slot (54 -> 62 bytes), PONG by range_sensors."""
+    """Version 3: TELEMETRY grew by one u8 per range sensor slot (54 -> 63 bytes), PONG by range_sensors."""
     assert P.PROTOCOL_VERSION == 3
-    assert struct.calcsize(P.Telemetry.FORMAT) == 54 + P.RANGE_SLOTS == 62 <= P.MAX_PAYLOAD
+    assert struct.calcsize(P.Telemetry.FORMAT) == 54 + P.RANGE_SLOTS == 63 <= P.MAX_PAYLOAD
     assert struct.calcsize(P.Pong.FORMAT) == 14
-    t = P.Telemetry(ranges_cm=(0, 10, 80, 33, 0, 0, 0, 0), sensors=int(P.Sensor.RANGES_OK))
-    assert t.pack()[54:] == bytes([0, 10, 80, 33, 0, 0, 0, 0])      # after bumpers, slot order = ADC order
+    t = P.Telemetry(ranges_cm=(0, 10, 80, 33, 0, 0, 0, 0, 0), sensors=int(P.Sensor.RANGES_OK))
+    assert t.pack()[54:] == bytes([0, 10, 80, 33, 0, 0, 0, 0, 0])      # after bumpers, slot order = ADC order
     assert t.ranges_ok and not t.gyro_ok
-    assert t.ranges_m == (math.inf, 0.10, 0.80, 0.33, math.inf, math.inf, math.inf, math.inf)
+    assert t.ranges_m == (math.inf, 0.10, 0.80, 0.33, math.inf, math.inf, math.inf, math.inf, math.inf)
     with pytest.raises(ValueError, match="ranges_cm"):
-        P.Telemetry(ranges_cm=(10,) * 7)
+        P.Telemetry(ranges_cm=(10,) * 8)
     with pytest.raises(ValueError, match="ranges_cm"):
-        P.Telemetry(ranges_cm=(10,) * 7 + (300,))
+        P.Telemetry(ranges_cm=(10,) * 8 + (300,))
 
 
 def test_status_reports_ranges_of_the_layout(fake):
-    fake.range_sensors = 8
+    fake.range_sensors = 9
     with SerialDrive(fake.path, FAST) as drive:
-        assert drive.board.range_sensors == 8
+        assert drive.board.range_sensors == 9
         assert drive.status().ranges is None                              # no complete window yet
-        fake.telemetry = P.Telemetry(ranges_cm=(10, 0, 25, 80, 0, 41, 0, 12), sensors=int(P.Sensor.RANGES_OK))
+        fake.telemetry = P.Telemetry(ranges_cm=(10, 0, 25, 80, 0, 41, 0, 12, 33), sensors=int(P.Sensor.RANGES_OK))
         r = drive.status().ranges
-        assert r == (0.10, math.inf, 0.25, 0.80, math.inf, 0.41, math.inf, 0.12)
+        assert r == (0.10, math.inf, 0.25, 0.80, math.inf, 0.41, math.inf, 0.12, 0.33)
         RangeLayout().check(r)                                            # what the HAL promises
 
 
@@ -496,13 +496,13 @@ def test_board_without_range_sensors_reports_none(fake):
 
 
 def test_range_sensor_count_mismatch_is_refused_naming_the_field(fake):
-    fake.range_sensors = 8
+    fake.range_sensors = 9
     four = RangeLayout(azimuths_rad=(0.0, math.pi / 2, math.pi, -math.pi / 2))
-    with pytest.raises(DriveProtocolError, match=r"reads 8 range sensors.*range_layout expects 4"):
+    with pytest.raises(DriveProtocolError, match=r"reads 9 range sensors.*range_layout expects 4"):
         SerialDrive(fake.path, replace(FAST, range_layout=four))
     with pytest.raises(DriveProtocolError, match=r"range_layout expects none"):
         SerialDrive(fake.path, replace(FAST, range_layout=None))
-    with pytest.raises(ValueError, match="range_layout must have at most 8"):
-        SerialDriveConfig(range_layout=RangeLayout(azimuths_rad=tuple(k * 0.5 for k in range(9))))
+    with pytest.raises(ValueError, match="range_layout must have at most 9"):
+        SerialDriveConfig(range_layout=RangeLayout(azimuths_rad=tuple(k * 0.5 for k in range(10))))
     with pytest.raises(ValueError, match="range_layout must be a robot.ranging.RangeLayout"):
         SerialDriveConfig(range_layout=8)

@@ -170,23 +170,41 @@ static void set_bumpers(uint8_t pressed)
         avr_raise_irq(bump_irq[i], (pressed >> i) & 1 ? 0 : 1);
 }
 
-/* analog inputs: value (mV) and ripple per channel, applied at the start of each conversion */
+/* analog inputs ADC0..ADC8 (the range sensors' RANGE_SLOTS): value (mV) and ripple per channel, applied at the
+ * start of each conversion */
+#define N_ADC 9
 static avr_irq_t *adc_irq;
-static double adc_mv[8], adc_swing[8];
-static uint8_t adc_phase[8];
+static double adc_mv[N_ADC], adc_swing[N_ADC];
+static uint8_t adc_phase[N_ADC];
+
+static avr_adc_t *adc_io;
 
 static void set_adc_input(int ch)
 {
     double mv = adc_mv[ch] + (adc_phase[ch] ? -adc_swing[ch] : adc_swing[ch]);
     mv = mv < 0 ? 0 : mv > SUPPLY_MV ? SUPPLY_MV : mv;
-    avr_raise_irq(adc_irq + ADC_IRQ_ADC0 + ch, (uint32_t)lround(mv));
+    if (ch < 8)
+        avr_raise_irq(adc_irq + ADC_IRQ_ADC0 + ch, (uint32_t)lround(mv));
+    else
+        adc_io->muxmode[24 + ch] = (avr_adc_mux_t){.kind = ADC_MUX_REF, .src = (unsigned long)lround(mv)};
+}
+
+/* simavr 1.6 (Debian) decodes MUX5 on the 2560 and maps ADC8..15 (MUX5:0 = 32..39, ATmega2560 data sheet table
+ * 26-4) to single-ended inputs 8..15, but keeps voltages for ADC0..7 only (adc_values[8]): ADC8 would convert
+ * whatever follows that array. The harness turns ADC8's mux mode into a fixed "reference" input at the voltage the
+ * test sets (set_adc_input), which simavr converts like a pin (mV against the reference). No ripple on it. */
+static void patch_adc_high_channels(avr_t *avr)
+{
+    for (avr_io_t *io = avr->io_port; io; io = io->next)
+        if (io->kind && !strcmp(io->kind, "adc"))
+            adc_io = (avr_adc_t *)io;                   /* avr_io_t is its first member */
 }
 
 static void adc_start_hook(struct avr_irq_t *irq, uint32_t value, void *param)
 {
     (void)irq; (void)param;
     union { avr_adc_mux_t mux; uint32_t v; } e = {.v = value};
-    if (e.mux.kind == ADC_MUX_SINGLE && e.mux.src < 8 && adc_swing[e.mux.src] > 0) {
+    if (e.mux.kind == ADC_MUX_SINGLE && e.mux.src < N_ADC && adc_swing[e.mux.src] > 0) {
         adc_phase[e.mux.src] ^= 1;
         set_adc_input(e.mux.src);
     }
@@ -223,14 +241,14 @@ static void run_command(char *line)
     } else if (!strcmp(line, "ADC") && arg) {
         int ch = -1;
         double mv = -1, swing = 0;
-        if (sscanf(arg, "%d %lf %lf", &ch, &mv, &swing) >= 2 && ch >= 0 && ch < 8 && mv >= 0 && mv <= SUPPLY_MV
-            && swing >= 0) {
+        if (sscanf(arg, "%d %lf %lf", &ch, &mv, &swing) >= 2 && ch >= 0 && ch < N_ADC && mv >= 0 && mv <= SUPPLY_MV
+            && swing >= 0 && (ch < 8 || swing == 0)) {
             adc_mv[ch] = mv;
             adc_swing[ch] = swing;
             set_adc_input(ch);
             printf("ADC %llu %d %.0f %.0f\n", (unsigned long long)avr->cycle, ch, mv, swing);
         } else {
-            fprintf(stderr, "simdrive: ADC expects <channel 0..7> <millivolts 0..%d> [<swing mV>], got %s\n",
+            fprintf(stderr, "simdrive: ADC expects <channel 0..8> <millivolts 0..%d> [<swing mV>, channels 0..7], got %s\n",
                     SUPPLY_MV, arg);
         }
     } else {
@@ -403,8 +421,9 @@ int main(int argc, char **argv)
     if (with_gyro)
         gyro_part_attach(avr, AVR_IOCTL_TWI_GETIRQ(0));
     adc_irq = avr_io_getirq(avr, AVR_IOCTL_ADC_GETIRQ, 0);
+    patch_adc_high_channels(avr);
     avr_irq_register_notify(adc_irq + ADC_IRQ_OUT_TRIGGER, adc_start_hook, NULL);
-    for (int ch = 0; ch < 8; ch++)
+    for (int ch = 0; ch < N_ADC; ch++)
         set_adc_input(ch);
     fcntl(STDIN_FILENO, F_SETFL, fcntl(STDIN_FILENO, F_GETFL) | O_NONBLOCK);
 

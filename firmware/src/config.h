@@ -48,7 +48,7 @@
  * robot.ranging.RangeLayout has (the host checks the count in PONG); 0 = none, ADC left off.
  * Override at build time: make EXTRA_CFLAGS=-DRANGE_SENSORS=0 */
 #ifndef RANGE_SENSORS
-#define RANGE_SENSORS       8u
+#define RANGE_SENSORS       9u
 #endif
 #define RANGE_SAMPLE_MS     2u        /* one sweep of all sensors this often ... */
 #define RANGE_WINDOW_MS     50u       /* ... averaged over this window (25 samples per sensor) */

@@ -27,8 +27,8 @@ enum fault_bits {
 #define ACK_SPEED_LIMITED    0x01u
 #define AZIMUTH_LIMIT_MRAD   3142
 
-#define TELEMETRY_LEN        62u
-#define RANGE_SLOTS          8u      /* TELEMETRY ranges_cm: one u8 per sensor slot (ADC0..ADC7) */
+#define TELEMETRY_LEN        63u
+#define RANGE_SLOTS          9u      /* TELEMETRY ranges_cm: one u8 per sensor slot (ADC0..ADC8) */
 
 #define SENSOR_GYRO_OK       0x01u   /* TELEMETRY sensors: the gyro answers and its rate is valid */
 #define SENSOR_RANGES_OK     0x02u   /* TELEMETRY sensors: range sensors fitted and ranges_cm valid */

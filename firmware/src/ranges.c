@@ -5,7 +5,7 @@
  * result always belongs to the channel selected before it started, on the chip as in simavr;
  * a free-running ADC would convert the old channel once more after every switch). 16 MHz /128
  * = 125 kHz ADC clock (within the 50-200 kHz of full 10-bit resolution, ATmega2560 data sheet),
- * 13 ADC clocks = 104 us per conversion, 0.83 ms per sweep of eight. AVcc reference: on the
+ * 13 ADC clocks = 104 us per conversion, 0.94 ms per sweep of nine. AVcc reference: on the
  * robot the Mega's 5 V comes from its on-board regulator, and the sensors run from it too.
  *
  * Averaging: the GP2Y0A21YK0F updates its output once per 38.3 +- 9.6 ms measurement (data
@@ -31,7 +31,7 @@
 #include <avr/io.h>
 
 #if RANGE_SENSORS > RANGE_SLOTS
-#error "RANGE_SENSORS: at most 8 sensors (ADC0..ADC7)"
+#error "RANGE_SENSORS: at most RANGE_SLOTS sensors (ADC0..ADC8)"
 #endif
 
 static uint8_t cm[RANGE_SLOTS];
@@ -67,11 +67,18 @@ static uint8_t conv = RANGE_SENSORS;    /* next sensor to convert; RANGE_SENSORS
 static uint8_t skip = (RANGE_WARMUP_MS + RANGE_WINDOW_MS - 1) / RANGE_WINDOW_MS;
 static uint8_t ok;
 
+/* ADC0..7 are MUX4:0 = channel with MUX5 = 0, ADC8..15 the same with MUX5 = 1 (ATmega2560 data sheet, table 26-4). */
+static inline void select(uint8_t c)
+{
+    ADCSRB = c >= 8u ? _BV(MUX5) : 0u;
+    ADMUX = _BV(REFS0) | (c & 7u);
+}
+
 ISR(ADC_vect)
 {
     sum[ch] += ADC;
     if (++ch < RANGE_SENSORS) {
-        ADMUX = _BV(REFS0) | ch;
+        select(ch);
         ADCSRA |= _BV(ADSC);
     } else {
         sweeps++;
@@ -81,9 +88,10 @@ ISR(ADC_vect)
 
 void ranges_init(void)
 {
-    DIDR0 = (uint8_t)((1u << RANGE_SENSORS) - 1u);     /* no digital input buffers on the analog pins */
-    ADCSRB = 0;                                         /* MUX5 = 0: ADC0..ADC7 */
-    ADMUX = _BV(REFS0);                                 /* AVcc reference, ADC0 */
+    /* no digital input buffers on the analog pins */
+    DIDR0 = (uint8_t)(RANGE_SENSORS >= 8u ? 0xFFu : (1u << RANGE_SENSORS) - 1u);
+    DIDR2 = (uint8_t)(RANGE_SENSORS > 8u ? (1u << (RANGE_SENSORS - 8u)) - 1u : 0u);
+    select(0);                                          /* AVcc reference, ADC0 */
     ADCSRA = _BV(ADEN) | _BV(ADIE) | _BV(ADPS2) | _BV(ADPS1) | _BV(ADPS0);   /* /128: 125 kHz */
 }
 
@@ -105,7 +113,7 @@ static uint8_t to_cm(uint16_t q)
 
 void ranges_tick(uint16_t now_ms)
 {
-    if (conv < RANGE_SENSORS) {                         /* one division pair per tick, not eight at once */
+    if (conv < RANGE_SENSORS) {                         /* one division pair per tick, not nine at once */
         cm[conv] = done_sweeps ? to_cm((uint16_t)(((uint32_t)done_sum[conv] * OVERSAMPLE + done_sweeps / 2)
                                                   / done_sweeps))
                                : RANGE_NO_RETURN;
@@ -134,7 +142,7 @@ void ranges_tick(uint16_t now_ms)
         ch = 0;
         busy = 1;
         BARRIER();
-        ADMUX = _BV(REFS0);
+        select(0);
         ADCSRA |= _BV(ADSC);
     }
 }

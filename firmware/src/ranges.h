@@ -1,5 +1,5 @@
-/* Infrared range sensors: up to 8 Sharp GP2Y0A21YK0F-class analog distance sensors (10-80 cm) on
- * ADC0..ADC7 (PF0..PF7, Mega A0..A7); sensor i on ADCi looks along robot.ranging.RangeLayout's
+/* Infrared range sensors: up to 9 Sharp GP2Y0A21YK0F-class analog distance sensors (10-80 cm) on
+ * ADC0..ADC8 (PF0..PF7 and PK0, Mega A0..A8); sensor i on ADCi looks along robot.ranging.RangeLayout's
  * azimuth i. RANGE_SENSORS (config.h) of them; 0 = none (the ADC stays off). */
 #ifndef RANGES_H
 #define RANGES_H

@@ -15,7 +15,7 @@ pose by default), at ``resolution_m``; cells hold log-odds of "an obstacle (for 
 * ``visited`` counts footprint coverage (for exploration);
 * **range rays** (``mark_rays``, from ``robot.ranging``) keep their own layer of log-odds: a return raises its
   cell, the cells the ray crossed are lowered (the usual inverse sensor model of a beam, Thrun et al.,
-  *Probabilistic Robotics* ch. 9). A separate layer because the rays pass 0.105 m above the floor and the bumper
+  *Probabilistic Robotics* ch. 9). A separate layer because the rays pass 0.075 m above the floor and the bumper
   reaches down to 0.045 m: a clear ray over low rubble must not erase the contact that found it. A cell is an
   obstacle when either layer says so.
 
@@ -51,7 +51,7 @@ class OccupancyConfig:
     range_hit_log_odds: float = 0.7   # per ray return: two returns make an obstacle (one alone may be the floor
     #                                   seen by a tilted robot on rubble)
     range_sure_m: float = 0.35        # a return this close is an obstacle at once: the floor seen by a tilted ray
-    #                                   is >= 0.105 m / sin(tilt) away, 0.35 m at a 17 deg tilt
+    #                                   is >= 0.075 m / sin(tilt) away, 0.35 m at a 12 deg tilt
     range_free_log_odds: float = -0.35  # per ray crossing a cell
     range_max_log_odds: float = 3.5   # clamp: ten crossings clear a confirmed return again (odometry drifts)
 

@@ -97,9 +97,9 @@ class Sensor(IntFlag):
 
 BUMPERS_LIVE = 0x0F           # TELEMETRY ``bumpers``: bits 0-3 pressed now (debounced), PC0..PC3
 BUMPERS_PRESSED_SHIFT = 4     # bits 4-7: pressed at any time since the previous TELEMETRY
-# TELEMETRY ``ranges_cm``: one slot per analog input ADC0..ADC7 (PONG ``range_sensors`` says how many are fitted),
+# TELEMETRY ``ranges_cm``: one slot per analog input ADC0..ADC8 (PONG ``range_sensors`` says how many are fitted),
 # the distance in cm from the sensor along its ray (RANGE_MIN_CM..RANGE_MAX_CM), or RANGE_NO_RETURN
-RANGE_SLOTS = 8
+RANGE_SLOTS = 9
 RANGE_NO_RETURN = 0           # nothing within RANGE_MAX_CM
 RANGE_MIN_CM = 10             # Sharp GP2Y0A21YK0F: 10 cm ... (closer readings are clamped to it by the firmware)
 RANGE_MAX_CM = 80             # ... to 80 cm

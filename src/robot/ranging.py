@@ -2,10 +2,12 @@
 
 The robot carries ``len(azimuths_rad)`` Sharp GP2Y0A21YK0F-class infrared distance sensors (datasheet: 10-80 cm,
 a narrow beam, a new reading every 38.3 +- 9.6 ms), looking out horizontally from a ring of radius
-``mount_radius_m`` at ``height_m`` above the floor (robot frame: the floor under the wheels is z = 0). The ring lies inside the bumper (radius 0.16 m) so that the
-sensor's 10 cm dead zone, where its output folds back, ends at the bumper: anything the bumper has not touched is
-at least ``min_range_m`` away. ``height_m`` lies inside the bumper band (0.045-0.11 m): what the rays see, the
-bumper would hit.
+``mount_radius_m`` at ``height_m`` above the floor (robot frame: the floor under the wheels is z = 0). The ring
+lies inside the bumper (radius 0.16 m) so that the sensor's 10 cm dead zone, where its output folds back, ends at
+the bumper: anything the bumper has not touched is at least ``min_range_m`` away. ``height_m`` is the middle of
+the bumper band (0.045-0.11 m): what the rays see, the bumper would hit, and flat slabs 9-10 cm thick (which
+the bumper meets and the wheels cannot climb) are seen. So low, a ray must not pass a wheel: the sensors look
+every 30 deg but toward the three wheels (60, 180, 300 deg), keeping 30 deg (6 cm at the wheel) clear of them.
 
 Both HAL sides report the same thing (``robot.hal.DriveStatus.ranges``): the distance (m) from each sensor along
 its ray to the first surface, ``math.inf`` when nothing is within ``max_range_m``. The firmware converts the
@@ -29,9 +31,9 @@ __all__ = ["RangeLayout", "ray_ends"]
 class RangeLayout:
     """Where the range sensors sit on the robot (robot frame, SI units)."""
 
-    azimuths_rad: tuple[float, ...] = tuple(k * math.pi / 4 for k in range(8))  # eight, 45 deg apart
+    azimuths_rad: tuple[float, ...] = tuple(math.radians(a) for a in (0, 30, 90, 120, 150, 210, 240, 270, 330))
     mount_radius_m: float = 0.06     # ray origins: 0.06 m + the 0.10 m dead zone = the bumper's 0.16 m
-    height_m: float = 0.105          # above the floor: inside the bumper band (0.045-0.11 m), over the wheels (0.10)
+    height_m: float = 0.075          # above the floor: the middle of the bumper band
     min_range_m: float = 0.10        # GP2Y0A21YK0F datasheet: 10 cm ...
     max_range_m: float = 0.80        # ... to 80 cm
 

@@ -463,6 +463,7 @@ class RescueRun:
             "spl": _r(float(np.mean([v["spl"] for v in victims])) if victims else 0.0, 4),
             "path_length_m": _r(self.cum_path[-1]), "collisions": len(self.collisions),
             "collision_log": self.collisions, "bumper_recoveries": bumps,
+            "range_stops": sum(1 for e in self.events if e.decision is Decision.OBSTACLE),
             "n_listens": len(self.listens),
             "angular_error_deg": {"all_detections": stats(errs), "strongest_detection": stats(first)},
             "listens": self.listens,
@@ -600,7 +601,7 @@ def format_summary(result: dict) -> str:
     err = (f"median {a['median']:.1f} deg, mean {a['mean']:.1f} deg, p90 {a['p90']:.1f} deg over {a['n']} detections"
            if a["n"] else "no detections")
     lines.append(f"  path {r['path_length_m']:.2f} m, {r['collisions']} collision(s), {r['bumper_recoveries']} bumper "
-                 f"recoveries, {r['n_listens']} listens; direction error {err}; SPL {r['spl']:.2f}")
+                 f"recoveries, {r['range_stops']} range stops, {r['n_listens']} listens; direction error {err}; SPL {r['spl']:.2f}")
     w = r["wall_clock_s"]
     lines.append(f"  wall clock {w['loop']:.1f} s ({1 / max(w['per_sim_second'], 1e-9):.1f}x real time): physics "
                  f"{w['physics']:.1f} s, acoustics {w['acoustics']:.1f} s, localization {w['localization']:.1f} s, "
