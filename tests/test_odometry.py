@@ -252,19 +252,22 @@ def test_bad_travel_config_is_named():
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("seed", range(8))
-def test_gyro_aided_odometry_against_mujoco_truth_in_light_rubble(seed):
+@pytest.mark.parametrize("seed,range_sensors", [(s, False) for s in range(8)] + [(0, True), (1, True)])
+def test_gyro_aided_odometry_against_mujoco_truth_in_light_rubble(seed, range_sensors):
     """The rescue behaviour for up to 200 s in light rubble (bumps, recoveries, pushes against debris, a wheel
-    pressing on rubble below the bumper; it keeps exploring after the last find): the behaviour's gyro-aided
+    pressing on rubble below the bumper; it keeps exploring after the last find). The issue's "run with bumps" is
+    a robot without range sensors: it meets every obstacle with its bumper (with them it stops before most: two
+    seeds of that too, where the wheels meet debris below the rays and turn loaded). The behaviour's gyro-aided
     odometry against MuJoCo's true pose at the end of the run within the issue's 3 deg and 0.3 m, on the eight
     seeds of the issue's benchmark (about 11 s of CPU each). With the current behaviour every run lasts 200 s;
     the end errors are 0.03-0.71 deg and 0.05-0.16 m (0.06-0.36 m with every wheel trusted while it grips,
     before the loaded-wheel rule). (Wheels alone on the same readings are printed, not asserted.)"""
     from ssl_sim.runner import odometry_drift
 
-    r = odometry_drift("light_rubble_three", seed=seed, duration_s=200.0)
+    r = odometry_drift("light_rubble_three", seed=seed, duration_s=200.0, range_sensors=range_sensors)
     print(r)
-    assert r["sim_time_s"] >= 100.0 and r["bumper_recoveries"] >= 1
+    assert r["sim_time_s"] >= 100.0
+    assert r["range_stops"] >= 1 if range_sensors else (r["bumper_recoveries"] >= 1 and r["range_stops"] == 0)
     assert r["bias_updates"] >= 100                          # the bias was learnt standing, listen after listen
     assert r["heading_error_deg"] <= 3.0 and r["position_error_m"] <= 0.3
 

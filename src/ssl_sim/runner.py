@@ -40,6 +40,7 @@ from scipy import sparse
 from scipy.sparse.csgraph import dijkstra
 
 from robot.odometry import Odometry, wrap_angle
+from robot.ranging import RangeLayout
 from robot.monitored_audio import MonitoredAudio
 from robot.rescue import Decision, RescueBehaviour, RescueEvent
 from ssl_core.geometry import cube8
@@ -167,10 +168,11 @@ class RescueRun:
     """One scenario run with ``seed`` (default: the scenario's); ``run()`` returns the results dict.
 
     ``world``: the run's World if already built (``scenario.world(seed)``; sweeps build it on the
-    client so that workers need no scene files)."""
+    client so that workers need no scene files). ``range_layout``: the robot's range sensors (None: a robot
+    without them, which learns obstacles by touch alone)."""
 
     def __init__(self, scenario: Scenario, seed: int | None = None, logger: RunLogger | None = None,
-                 world: World | None = None) -> None:
+                 world: World | None = None, range_layout: RangeLayout | None = RangeLayout()) -> None:
         t0 = time.perf_counter()
         self.scenario = sc = scenario if seed is None else scenario.with_overrides(seed=seed)
         self.seed = sc.seed
@@ -186,7 +188,8 @@ class RescueRun:
             raise ValueError(f"localizer.fs = {sc.localizer.fs} Hz differs from the simulated audio "
                              f"({acoustics.config.fs} Hz)")
         self.audio = SimAudioSource(robot, acoustics, on_block=self._on_block)
-        self.drive = SimDriveBase(robot, seed=sc.seed)   # the run's seed draws the gyro's noise and drift
+        self.drive = SimDriveBase(robot, seed=sc.seed,   # the run's seed draws the gyro's noise and drift
+                                  range_layout=range_layout)
         self.clock = _TracingClock(robot, self._on_tick)
         localizer = Localizer(cube8(), sc.localizer)
         self.localizer = _RecordingLocalizer(localizer, self._on_result)
@@ -546,12 +549,15 @@ def run_scenario(scenario: Scenario | str | Path, seed: int | None = None, *, ti
     return result
 
 
-def odometry_drift(scenario: Scenario | str | Path, seed: int, duration_s: float = 200.0) -> dict[str, Any]:
+def odometry_drift(scenario: Scenario | str | Path, seed: int, duration_s: float = 200.0,
+                   range_sensors: bool = True) -> dict[str, Any]:
     """How far the behaviour's gyro-aided odometry drifts in ``duration_s`` s of a rescue run, against MuJoCo's truth,
     beside a wheels-only ``Odometry`` fed the same encoder readings. The behaviour runs the whole duration (after the
-    last find it keeps exploring, bumps included); headings in deg, positions in m, rates in deg/s."""
+    last find it keeps exploring, bumps included); headings in deg, positions in m, rates in deg/s.
+    ``range_sensors`` False: a robot without them, which meets obstacles by bumping into them."""
     sc = scenario if isinstance(scenario, Scenario) else load_scenario(scenario)
-    run = RescueRun(sc.with_overrides(seed=seed, time_limit_s=duration_s))
+    run = RescueRun(sc.with_overrides(seed=seed, time_limit_s=duration_s),
+                    range_layout=RangeLayout() if range_sensors else None)
     beh = run.behaviour
     wheels = Odometry(run.robot.params, run.world.robot_start)
     fused_update = beh.odometry.update
@@ -572,6 +578,7 @@ def odometry_drift(scenario: Scenario | str | Path, seed: int, duration_s: float
     (hf, pf), (hw, pw) = errors(beh.odometry.pose), errors(wheels.pose)   # pf, pw unrounded (m)
     return {"scenario": sc.name, "seed": seed, "sim_time_s": run.robot.time, "cpu_s": time.process_time() - t0,
             "bumper_recoveries": sum(1 for e in run.events if e.decision is Decision.RECOVER and e.data.get("bumper")),
+            "range_stops": sum(1 for e in run.events if e.decision is Decision.OBSTACLE),
             "n_found": len(run.found), "heading_error_deg": hf, "position_error_m": pf,
             "wheels_heading_error_deg": hw, "wheels_position_error_m": pw,
             "gyro_bias_deg_s": round(math.degrees(run.drive.gyro_bias), 4),
