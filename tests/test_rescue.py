@@ -7,7 +7,9 @@ import numpy as np
 import pytest
 
 from robot.hal import AudioBlock, AudioSource, DriveStatus, ManualClock
+from robot.motion import MotionConfig
 from robot.odometry import Odometry
+from robot.ranging import RangeLayout
 from robot.replay import DryRunDrive
 from robot.rescue import Decision, RescueBehaviour, RescueConfig, RescueEvent
 from robot.sound_map import SourceClass, SourceState
@@ -42,8 +44,9 @@ class Result:
 class World:
     """Ground truth: the dry-run drive's ideal odometry *is* the true pose; discs are obstacles."""
 
-    def __init__(self, sources, obstacles=(), start=(0.0, 0.0, 0.0), seed=0, array_height=0.30):
+    def __init__(self, sources, obstacles=(), start=(0.0, 0.0, 0.0), seed=0, array_height=0.30, ranges=None):
         self.clock = ManualClock()
+        self.ranges = ranges  # a RangeLayout: the drive reports range rays against the obstacle discs
         self.sources = list(sources)
         self.obstacles = list(obstacles)  # (x, y, radius)
         self.array_height = array_height
@@ -76,7 +79,27 @@ class WorldDrive(DryRunDrive):
         super().stop()
 
     def status(self):
-        return DriveStatus(bumper=self.world.touching(self.true_pose()), stalled=self.stalled, faults=self.faults)
+        pose = self.true_pose()
+        return DriveStatus(bumper=self.world.touching(pose), stalled=self.stalled, faults=self.faults,
+                           ranges=self._ranges(pose))
+
+    def _ranges(self, pose):
+        """Exact ray-disc distances from each sensor of the world's layout (inf beyond its maximum range)."""
+        layout = self.world.ranges
+        if layout is None:
+            return None
+        out = []
+        for a in layout.azimuths_rad:
+            u = np.array([math.cos(pose[2] + a), math.sin(pose[2] + a)])
+            s = np.asarray(pose[:2]) + layout.mount_radius_m * u
+            best = math.inf
+            for x, y, r in self.world.obstacles:
+                d = s - (x, y)
+                b, c = float(d @ u), float(d @ d) - r * r
+                if b * b - c >= 0 and (t := -b - math.sqrt(b * b - c)) >= 0:
+                    best = min(best, t)
+            out.append(best if best <= layout.max_range_m else math.inf)
+        return tuple(out)
 
 
 class FakeAudio(AudioSource):
@@ -229,6 +252,20 @@ def test_bump_maps_the_obstacle_and_the_plan_goes_around_it():
     # it got past the wall (touching it again would have shown as more contacts above)
     x, y, _ = w.pose()
     assert x > 1.5
+
+
+def test_range_sensors_see_the_wall_and_the_plan_goes_around_it_without_touching():
+    # The same wall, seen by the infrared rays: the robot stops before it, maps it and goes around, no bump.
+    wall = [(1.2, y, 0.12) for y in np.arange(-1.0, 1.01, 0.2)]
+    w = World([Source((3.0, 0.0, 0.1), 65.0)], obstacles=wall, seed=1, ranges=RangeLayout())
+    b = make(w, RescueConfig(max_victims=1), motion=MotionConfig(body_radius_m=ROBOT_RADIUS))
+    ev = b.run(max_time=200.0)
+    assert b.done and ev[-1].decision is Decision.ALL_FOUND and w.pose()[0] > 1.5
+    assert math.dist(b.victims[0].position, (3.0, 0.0)) < 0.3
+    assert not [e for e in ev if e.decision is Decision.RECOVER]               # never touched it
+    assert any(e.decision is Decision.OBSTACLE for e in ev)
+    occ = b.grid.obstacle_points()                                             # the wall, where it is
+    assert len(occ) >= 5 and np.all(np.abs(occ[:, 0] - 1.2) < 0.25) and np.ptp(occ[:, 1]) > 0.6
 
 
 def test_bump_at_an_unreachable_caller_counts_as_found():
