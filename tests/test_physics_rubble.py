@@ -7,6 +7,7 @@ import numpy as np
 import pytest
 
 from robot.hal import DriveStatus, WheelOdometry
+from robot.ranging import RangeLayout
 from ssl_sim.physics import RobotModelConfig, SimClock, SimDriveBase, SimRobot, load_scene
 from ssl_sim.world import Box, Room, World
 
@@ -157,7 +158,7 @@ def test_hal_backends_drive_the_simulated_robot():
         st = drive.status()  # driving straight: no bumper, no fault, the gyro sees (almost) no turn, every wall
         #                      is > 1 m away (beyond the range sensors' 0.8 m)
         assert replace(st, yaw_rate=None, ranges=None) == DriveStatus() and abs(st.yaw_rate) < 0.05
-        assert st.ranges == (np.inf,) * 8
+        assert st.ranges == (np.inf,) * RangeLayout().n
         clock.sleep(6.5)  # into the +x wall
         st = drive.status()
         assert st.bumper and not st.ok

@@ -52,8 +52,7 @@ class SimDriveBase(DriveBase):
 
     ``ranges``: the infrared range sensors of ``range_layout`` (``robot.ranging``; None: none fitted), MuJoCo rays
     from the true pose (``SimRobot.ray_distances``) plus Gaussian noise of ``range_noise`` times the distance (an
-    assumption: the GP2Y0A21YK0F datasheet gives no noise figure; a few per cent of the reading is what hobby
-    measurements of it show), held to ``min_range_m`` below it and rounded to whole centimetres as the firmware
+    assumption, not a measurement: the GP2Y0A21YK0F data sheet gives no noise figure), held to ``min_range_m`` below it and rounded to whole centimetres as the firmware
     reports them; inf where nothing is within ``max_range_m``. One reading per physics instant."""
 
     def __init__(self, robot: SimRobot, stall_min_speed: float = 1.0, stall_ratio: float = 0.25,
