@@ -131,3 +131,29 @@ def test_coverage_shows_the_floor_around_the_listens(recorded):
     assert len(pts) >= 0.5 * np.pi * r * r / 0.01             # at least half a disc of 0.1 m cells
     room = np.asarray(run.world.room.size[:2])
     assert np.all((pts >= -0.05) & (pts <= room + 0.05))
+
+
+def test_range_rays_end_on_the_obstacles_they_saw(recorded):
+    """The range readings are drawn as rays from the sensor ring; a red ray (a return) ends on a surface of the
+    room or its rubble (MuJoCo truth, within odometry drift and the readings' 2 % noise), a grey one at 0.8 m."""
+    run, result, chunks = recorded
+    _, strips = _component(chunks, "/world/ranges", "LineStrips3D:strips")
+    _, colors = _component(chunks, "/world/ranges", "LineStrips3D:colors")
+    assert strips, "no range rays logged"
+    rays = np.concatenate([np.array(s, float) for s in strips])          # (k, 2, 3): start, end
+    red = np.concatenate([[(c >> 24) & 0xFF for c in cs] for cs in colors]) > 200
+    assert rays.shape[1:] == (2, 3) and len(rays) % 9 == 0 and red.any() and not red.all()
+    length = np.linalg.norm(rays[:, 1] - rays[:, 0], axis=1)
+    assert np.allclose(length[~red], 0.8)
+    w = run.world
+    for end in rays[red, 1, :2]:
+        gaps = [min(end[0], end[1], w.room.size[0] - end[0], w.room.size[1] - end[1])]
+        for box in w.obstacles:
+            if box.climbable:
+                continue
+            c, s = np.cos(box.yaw), np.sin(box.yaw)
+            d = end - np.asarray(box.center[:2])
+            local = np.abs([c * d[0] + s * d[1], -s * d[0] + c * d[1]]) - np.asarray(box.size[:2]) / 2
+            gaps.append(float(np.hypot(*np.maximum(local, 0.0))))
+        assert min(gaps) < 0.08, (end, min(gaps))
+    print(f"{len(rays) // 9} readings drawn, {int(red.sum())} returns")

@@ -40,7 +40,7 @@ from scipy import sparse
 from scipy.sparse.csgraph import dijkstra
 
 from robot.odometry import Odometry, wrap_angle
-from robot.ranging import RangeLayout
+from robot.ranging import RangeLayout, ray_ends
 from robot.monitored_audio import MonitoredAudio
 from robot.rescue import Decision, RescueBehaviour, RescueEvent
 from ssl_core.geometry import cube8
@@ -366,6 +366,10 @@ class RescueRun:
         self.logger.sound_map(t, b.map.sources)
         self.logger.plan(t, b.pose[:2], None if b.plan is None else b.plan.waypoints)
         self.logger.obstacles(t, b.grid.obstacle_points(), b.grid.resolution)
+        if self.drive.last_ranges is not None:
+            starts, ends, hit = ray_ends(b.range_layout, b.pose, self.drive.last_ranges)
+            z = np.full((len(starts), 1), b.range_layout.height_m)
+            self.logger.ranges(t, np.hstack([starts, z]), np.hstack([ends, z]), hit)
         heard = b.coverage.in_area & (b.coverage.unheard < 1.0)
         ij = np.argwhere(heard)
         self.logger.coverage(t, b.grid.centre(ij), b.coverage.unheard[heard])

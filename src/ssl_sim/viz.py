@@ -21,6 +21,9 @@ Entities (world frame unless said otherwise; all lengths m)::
     world/trail              the path driven (LineStrips3D)
     world/target             where the behaviour is heading (Arrows3D from the robot, world)
     world/coverage           floor listened to, coloured by P(a caller there still unheard) (Points3D)
+    world/learned_obstacles  the behaviour's occupancy grid: cells learned by touch or range rays (Boxes3D)
+    world/ranges             the range sensors' last rays as the behaviour placed them (LineStrips3D: red to
+                             a return, grey to the sensors' maximum range where nothing was seen)
     plots/angular_error_deg, plots/distance_to_victim_m, plots/wheel_speed/{0,1,2} (Scalars)
     log/behaviour            the behaviour's decisions (TextLog); log/state its state
 """
@@ -92,7 +95,11 @@ class RunLogger:
         """The planned path (k, 2) from ``start_world`` (x, y), or None."""
 
     def obstacles(self, t: float, cells_world: np.ndarray, cell_size: float) -> None:
-        """Obstacles learned by touch: centres (k, 2) of occupied grid cells of ``cell_size`` m."""
+        """Obstacles learned by touch and range rays: centres (k, 2) of occupied grid cells of ``cell_size`` m."""
+
+    def ranges(self, t: float, starts_world: np.ndarray, ends_world: np.ndarray, hit: np.ndarray) -> None:
+        """The range sensors' last reading: rays from ``starts_world`` to ``ends_world`` ((k, 3) each) and whether
+        each ended on a return (``hit``, (k,)) or at the sensors' maximum range."""
 
     def coverage(self, t: float, cells_world: np.ndarray, unheard: np.ndarray) -> None:
         """Floor listened to: centres (k, 2) of grid cells and the probability (k,) that a caller there is
@@ -354,6 +361,12 @@ class RerunLogger(RunLogger):
                      self.rr.Boxes3D(centers=np.column_stack([c, np.full(len(c), 0.1)]),
                                      half_sizes=[[cell_size / 2, cell_size / 2, 0.1]] * len(c),
                                      colors=[(230, 120, 40, 160)], fill_mode=self.rr.components.FillMode.Solid))
+
+    def ranges(self, t, starts_world, ends_world, hit) -> None:
+        self._time(t)
+        a, b = np.asarray(starts_world, float).reshape(-1, 3), np.asarray(ends_world, float).reshape(-1, 3)
+        colors = [(230, 40, 40) if h else (150, 150, 150) for h in np.asarray(hit, bool).reshape(-1)]
+        self.rec.log("world/ranges", self.rr.LineStrips3D(np.stack([a, b], axis=1), colors=colors, radii=0.004))
 
     def coverage(self, t, cells_world, unheard) -> None:
         self._time(t)

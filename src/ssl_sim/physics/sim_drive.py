@@ -116,6 +116,12 @@ class SimDriveBase(DriveBase):
         yaw_rate = self._window[1]
         return DriveStatus(bumper=self.robot.bumper(), stalled=stalled, yaw_rate=yaw_rate, ranges=self._read_ranges())
 
+    @property
+    def last_ranges(self) -> tuple[float, ...] | None:
+        """The last reading ``status`` returned (None before the first or without sensors); reading it draws no
+        noise, so watching a run does not change it."""
+        return None if self._ranges is None else self._ranges[1]
+
     def _read_ranges(self) -> tuple[float, ...] | None:
         layout = self.range_layout
         if layout is None:
