@@ -107,7 +107,7 @@ class SerialDriveConfig:
             raise ValueError(f"range_layout must be a robot.ranging.RangeLayout or None, got {self.range_layout!r}")
         if self.range_layout is not None and self.range_layout.n > P.RANGE_SLOTS:
             raise ValueError(f"range_layout must have at most {P.RANGE_SLOTS} sensors (the firmware's analog "
-                             f"inputs ADC0..ADC7), got {self.range_layout.n}")
+                             f"inputs ADC0..ADC8), got {self.range_layout.n}")
 
 
 @dataclass
