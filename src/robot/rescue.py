@@ -14,8 +14,8 @@ One cycle walks the data path, each stage in its own module:
   ``cue_sigma_m``, the bearing now points ``reach_elevation_deg`` down and the level rose (supporting cues);
   (1)-(3) only when the bearing heard now is a strong SRP-PHAT peak (``found_min_power``: direct sound),
   or (4) the bumper fires (or the range sensors stop the move before an obstacle) while driving at it with
-  its estimate within
-  ``bump_found_range_m`` and ``bump_ahead_deg`` of the motion, a voice was heard from it, it was heard within
+  its estimate within ``bump_found_range_m`` and ``bump_ahead_deg`` of the motion, a voice was heard from it,
+  it was heard within
   ``bump_heard_within_s`` and its last bearing pointed ``supporting_elevation_deg`` down (a victim under a
   slab cannot be reached).
   A steep bearing no louder than a shallow one heard from the same spot in its direction is an echo, no cue.
