@@ -15,9 +15,8 @@ One cycle walks the data path, each stage in its own module:
   (1)-(3) only when the bearing heard now is a strong SRP-PHAT peak (``found_min_power``: direct sound),
   or (4) the bumper fires (or the range sensors stop the move before an obstacle) while driving at it with
   its estimate within ``bump_found_range_m`` and ``bump_ahead_deg`` of the motion, a voice was heard from it,
-  it was heard within
-  ``bump_heard_within_s`` and its last bearing pointed ``supporting_elevation_deg`` down (a victim under a
-  slab cannot be reached).
+  it was heard within ``bump_heard_within_s`` and its last bearing pointed ``supporting_elevation_deg`` down
+  (a victim under a slab cannot be reached).
   A steep bearing no louder than a shallow one heard from the same spot in its direction is an echo, no cue.
   The reported position is the map's estimate (for a steep bearing that joined a source mapped farther than
   ``found_exclusion_m``, where that bearing meets the floor); a found source stays found (never declared again).
