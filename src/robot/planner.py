@@ -14,7 +14,7 @@ Frames: world/odometry frame (x, y in m). Inputs are the ``SoundMap``'s sources 
   beside a mapped interferer, or heard along its line, is taken for that machine's image and not approached
   (``machine_image``); nor is an interferer checked that images one checked already.
 * **path** (``plan``): Dijkstra (``scipy.sparse.csgraph``) on the grid's free cells (unknown counts as
-  free: only touch tells obstacles), 16-connected, to the nearest cell within ``stop_radius`` of the goal;
+  free: obstacles are known only where touched or seen by the range sensors), 16-connected, to the nearest cell within ``stop_radius`` of the goal;
   then shortened to line-of-sight waypoints.
 * **exploration** (``explore_goal``): ``explore_headings`` points ``explore_distance_m`` away; the reachable one
   where a listen would hear most of the floor not yet listened to (``robot.coverage``: a mapped machine's

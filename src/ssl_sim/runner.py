@@ -612,7 +612,8 @@ def format_summary(result: dict) -> str:
     err = (f"median {a['median']:.1f} deg, mean {a['mean']:.1f} deg, p90 {a['p90']:.1f} deg over {a['n']} detections"
            if a["n"] else "no detections")
     lines.append(f"  path {r['path_length_m']:.2f} m, {r['collisions']} collision(s), {r['bumper_recoveries']} bumper "
-                 f"recoveries, {r['range_stops']} range stops, {r['n_listens']} listens; direction error {err}; SPL {r['spl']:.2f}")
+                 f"recoveries, {r['range_stops']} range stops, {r['n_listens']} listens; direction error {err}; "
+                 f"SPL {r['spl']:.2f}")
     w = r["wall_clock_s"]
     lines.append(f"  wall clock {w['loop']:.1f} s ({1 / max(w['per_sim_second'], 1e-9):.1f}x real time): physics "
                  f"{w['physics']:.1f} s, acoustics {w['acoustics']:.1f} s, localization {w['localization']:.1f} s, "

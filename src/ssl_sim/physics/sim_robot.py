@@ -106,7 +106,6 @@ class SimRobot:
         self._mics = np.array([m.site(rm.mic_site(i)).id for i in range(config.array.n_mics)])
         self._motors = np.array([m.geom(f"motor{i}_body").id for i in range(3)])
         self._robot_bodies = self._subtree(self._base)
-        self._robot_geoms = frozenset(g for g in range(m.ngeom) if m.geom_bodyid[g] in self._robot_bodies)
         self._floor = m.geom(FLOOR_GEOM).id
         self._bumper = m.geom(rm.BUMPER_GEOM).id
         # Static geoms the bumper can meet: everything of the world's but the floor and small debris.
@@ -310,8 +309,8 @@ class SimRobot:
 
     def ray_distances(self, layout: RangeLayout) -> np.ndarray:
         """Ground truth of ``layout``'s range sensors now: the distance (m) from each sensor along its ray (robot
-        frame, tilted with the base) to the first world geom, ``inf`` beyond ``max_range_m``. The robot's own
-        geoms are not seen (the base is excluded; the rays pass over the wheels)."""
+        frame, tilted with the base) to the first geom, ``inf`` beyond ``max_range_m``. The base's own geoms are
+        excluded (the rays start inside the bumper); the layout keeps the rays clear of the wheels."""
         self._sync()
         d = self.data
         rot = d.xmat[self._base].reshape(3, 3)
@@ -323,7 +322,7 @@ class SimRobot:
         geom = np.zeros(1, np.int32)
         for k in range(len(az)):
             r = mujoco.mj_ray(self.model, d, starts[k], dirs[k], _RAY_GROUPS, 1, self._base, geom)
-            if 0 <= r <= layout.max_range_m and geom[0] not in self._robot_geoms:
+            if 0 <= r <= layout.max_range_m:
                 out[k] = r
         return out
 
