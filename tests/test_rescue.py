@@ -441,6 +441,8 @@ def test_config_errors_name_the_field():
         RescueConfig(found_distance_m=0.0)
     with pytest.raises(ValueError, match="max_victims"):
         RescueConfig(max_victims=0)
+    with pytest.raises(ValueError, match="RescueConfig.voice_scan_deg"):
+        RescueConfig(voice_scan_deg=-15.0)
     w = World([])
     with pytest.raises(ValueError, match="geometry: 8 microphones but the audio source has 4"):
         make(w, audio=FakeAudio(w.clock, n_channels=4), geometry=cube8())

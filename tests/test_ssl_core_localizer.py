@@ -269,3 +269,31 @@ def test_noise_suppression_reveals_a_voice_under_steady_louder_noise():
         if k == 20000:
             loc.locate(x[:, :FS])  # a whole-recording call in between must not disturb the stream's floor
     assert batch == stream
+
+
+def test_peak_in_sector_finds_a_weak_source_beside_a_loud_one():
+    """A source 6 dB under a louder one is no detection of a one-source search; its azimuth sector (as a
+    voice scan gives it, 8 deg off) holds its direction, elevation included, within two fine grid spacings."""
+    g, rng = cube8(), np.random.default_rng(3)
+    loud = direction_from_angles(np.deg2rad(60.0), 0.0)
+    weak = direction_from_angles(np.deg2rad(-100.0), np.deg2rad(-25.0))
+    n = FS
+    x = (0.04 * plane_wave(g.positions, loud, rng.standard_normal(n), FS)
+         + 0.02 * plane_wave(g.positions, weak, speech_like(n, FS, seed=4), FS)
+         + 1e-3 * rng.standard_normal((8, n)))
+    loc1 = Localizer(cube8(), LocalizerConfig(n_sources=1))
+    res = loc1.locate(x)
+    assert len(res.detections) == 1 and deg_err(res.detections[0], loud) < 2.0
+    peak = loc1.peak_in_sector(res, np.deg2rad(-92.0), np.deg2rad(15.0), x)
+    assert peak is not None and deg_err(peak, weak) < 2 * loc1.config.resolution_deg, peak
+    assert peak.significance >= loc1.config.min_significance
+    assert peak.level_db < res.detections[0].level_db - 3.0      # its own beam's level (6 dB under), not the loud one's
+    # without a sector around it there is no such peak: the sector 90 deg away holds only weaker directions
+    other = loc1.peak_in_sector(res, np.deg2rad(170.0), np.deg2rad(15.0), x)
+    assert other is None or other.power < 0.5 * peak.power
+
+
+def test_peak_in_sector_of_silence_is_none():
+    loc1 = Localizer(cube8(), LocalizerConfig())
+    res = loc1.locate(np.zeros((8, FS), np.float32))
+    assert loc1.peak_in_sector(res, 0.0, np.deg2rad(15.0)) is None

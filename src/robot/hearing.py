@@ -427,6 +427,25 @@ def speech_fractions(samples: np.ndarray, mic_positions: np.ndarray, directions:
     return np.array([hearing.speech_fraction(i) for i in range(len(d))])
 
 
+def voice_scan(samples: np.ndarray, mic_positions: np.ndarray, vad: SileroVad | None = None,
+               sample_rate: int = SAMPLE_RATE, step_deg: float = 15.0, block_s: float = 0.1) -> float | None:
+    """One listen standing still: the azimuth (rad, array frame) of the horizon beam that carries the most
+    speech, or None when no scan beam heard speech. The voice scan of ``Hearing`` (``scan_step_deg``: MPDR
+    beams every ``step_deg``, each heard by Silero; score = VAD probability x denoised beam power over the
+    listen) on a fresh state, fed ``block_s`` at a time; its last detection of the listen is the answer. It
+    finds a talker that is no peak of the SRP-PHAT map beside a louder machine (docs/hearing.md, "The voice
+    scan"). ``samples``: (n_mics, n) int16 or float full scale 1 at 16 kHz."""
+    hearing = Hearing(mic_positions, sample_rate, HearingConfig(vad_on_s=1.0, vad_period_s=1.0, beam_update_s=block_s,
+                                                                scan_step_deg=step_deg), vad=vad)
+    x = as_float_audio(samples)
+    step = max(1, int(round(block_s * SAMPLE_RATE)))
+    found = None
+    for k in range(0, x.shape[-1], step):
+        hearing.update(x[:, k:k + step], [], (k + step) / SAMPLE_RATE)
+        found = next(iter(hearing.voice_detections()), found)
+    return None if found is None else float(found.azimuth)
+
+
 @dataclass
 class _TrackState:
     vad: VadStream

@@ -122,6 +122,13 @@ class RescueConfig:
     voice_threshold: float = 0.1           # VAD speech-frame fraction of a beam counted as voice (robot.listening;
     #                                        robot.vad.CHUNK_SPEECH_FRACTION = 0.2 separates dry 1 s chunks;
     #                                        reverberant beams of callers 2-4 m away have fewer)
+    voice_scan_deg: float = 0.0            # > 0: a listen whose strongest detection is no voice is also scanned for one,
+    #                                        beams this far apart in azimuth (robot.listening.Listener; hears a caller
+    #                                        beside a louder machine in 30 of 70 listens instead of 14). Off: at 15 deg,
+    #                                        seeds 0-7, light rubble and generator_louder were unchanged, dense_pump 4
+    #                                        of 16 as without, half_buried_slab 11 vs 12 of 16 (3 false founds vs 2),
+    #                                        behind_partition SPL 0.548 vs 0.593; light rubble seeds 16-31 47 vs 46 of
+    #                                        48, SPL 0.601 vs 0.582 (docs/rescue_benchmark.md, "Session 8")
     require_voice: bool = False            # approach only sources classified victim (not unclassified ones)
     # geometry (shared with the sound map: one source of truth for the array height)
     array_height_m: float = 0.30           # array centre above the floor
@@ -232,6 +239,8 @@ class RescueConfig:
             raise ValueError(f"RescueConfig.reach_elevation_deg: expected 0 <= deg < 90, got {self.reach_elevation_deg}")
         if not 0 <= self.voice_threshold <= 1:
             raise ValueError(f"RescueConfig.voice_threshold: expected 0..1, got {self.voice_threshold}")
+        if not 0 <= self.voice_scan_deg <= 90:
+            raise ValueError(f"RescueConfig.voice_scan_deg: expected 0 (off) .. 90 deg, got {self.voice_scan_deg}")
         if self.min_step_m > self.step_m:
             raise ValueError(f"RescueConfig.min_step_m: expected <= step_m = {self.step_m}, got {self.min_step_m}")
         if not (isinstance(self.fatal_faults, tuple) and set(self.fatal_faults) <= set(FAULT_NAMES.values())):
@@ -302,7 +311,7 @@ class RescueBehaviour:
                              range_layout=range_layout)
         self.range_layout = range_layout
         self._scan_pose: np.ndarray | None = None   # where the last range reading went into the grid
-        self.listener = Listener(audio, clock, localizer, mics, config.voice_threshold, speech)
+        self.listener = Listener(audio, clock, localizer, mics, config.voice_threshold, speech, config.voice_scan_deg)
         self.map = SoundMap(dataclasses.replace(sound_map, array_height_m=config.array_height_m))
         self.grid = OccupancyGrid(occupancy, origin=np.asarray(start_pose, float)[:2])
         self.coverage = ListeningCoverage(self.grid.origin, self.grid.n, self.grid.resolution, coverage)
@@ -441,7 +450,8 @@ class RescueBehaviour:
         for ev, sid in assoc:
             s = self.map.source(sid)
             row = {"source": sid, "azimuth": ev.azimuth, "elevation": ev.elevation, "level_db": ev.level_db,
-                   "voice": ev.speech_fraction, "class": s.cls.value, "state": s.state.value}
+                   "voice": ev.speech_fraction, "voice_scan": ev.voice_scan, "class": s.cls.value,
+                   "state": s.state.value}
             if s.state is SourceState.FOUND:
                 ignored.append(f"az {math.degrees(ev.azimuth):+.0f} deg el {math.degrees(ev.elevation):+.0f} deg "
                                f"is found victim #{self._victim_number(sid)}")
@@ -451,7 +461,8 @@ class RescueBehaviour:
         if cands:
             self._silent = 0
             desc = "; ".join(f"#{c['source']} {c['class']} az {math.degrees(c['azimuth']):+.0f} deg "
-                             f"el {math.degrees(c['elevation']):+.0f} deg voice {c['voice']:.2f}" for c in cands)
+                             f"el {math.degrees(c['elevation']):+.0f} deg voice {c['voice']:.2f}"
+                             + (" (voice scan)" if c["voice_scan"] else "") for c in cands)
             self._emit(Decision.HEARD, desc + (f"; ignored: {'; '.join(ignored)}" if ignored else ""), data)
         else:
             self._silent += 1

@@ -216,6 +216,7 @@ class Localizer:
         self._max_lag = int(np.ceil(max_tau * cfg.fs * cfg.upsample)) + 2
         self._coarse = SteeringTable(tdoa_c, cfg.fs, cfg.upsample, self._max_lag, interpolate=False)
         self._fine = SteeringTable(tdoa_f, cfg.fs, cfg.upsample, self._max_lag)
+        self._fine_az = np.arctan2(self.fine_grid.directions[:, 1], self.fine_grid.directions[:, 0])
         self._fine_pos = (tdoa_f * cfg.fs * cfg.upsample).astype(np.float32)  # lag of each fine point, per pair
         self._lag_axis = np.arange(-self._max_lag, self._max_lag + 1, dtype=np.float32)
         self._window_s = cfg.window_frames * cfg.hop / cfg.fs  # the hop between windows (s)
@@ -339,6 +340,38 @@ class Localizer:
                 # the beam level needs the spectra, gone by now: the recording's band level bounds it from above
                 detections.append(Detection(float(az), float(el), u.copy(), power, level, z))
         return LocalizationResult(t_end, detections, srp_map, frames, level, gcc, w_sum, n_eff)
+
+    def peak_in_sector(self, result: LocalizationResult, azimuth: float, half_width: float,
+                       recording=None) -> Detection | None:
+        """The strongest direction of ``result``'s window-summed SRP whose azimuth lies within ``half_width``
+        (rad) of ``azimuth`` (rad, array frame), at any elevation of the fine grid, with the TDOAs of
+        ``result.detections`` masked out of every pair's GCC first (as before each search of a further
+        source: a louder source's lobes reach into the sector). For a direction known in azimuth only (a
+        beam that heard a voice) it gives the elevation and the SRP power there. ``level_db``: the band level of
+        the delay-and-sum beam toward it over ``recording`` (channels, samples: the audio ``result`` came
+        from), else the result's band level (an upper bound). None for a silent result or an empty sector."""
+        if result.gcc is None or result.weight_sum <= 0:
+            return None
+        cols = np.flatnonzero(np.abs(np.remainder(self._fine_az - azimuth + np.pi, 2 * np.pi) - np.pi) <= half_width)
+        if not len(cols):
+            return None
+        work = result.gcc
+        for d in result.detections:
+            work = self._mask(work, int(np.argmax(self.fine_grid.directions @ np.asarray(d.direction, float))))
+        p = self._fine.power(work, cols)
+        f = int(cols[int(np.argmax(p))])
+        z = float((p.max() - self._fine.power(np.ascontiguousarray(work[:, ::-1]), np.array([f]))[0])
+                  * np.sqrt(max(result.n_eff, 0.0) * self._pairs_in_use()))
+        u = self.fine_grid.directions[f]
+        az, el = azimuth_elevation(u)
+        level = result.level_db if recording is None else \
+            self._beam_level(self._analyse(self._check(recording, None))[0], f)
+        return Detection(float(az), float(el), u.copy(), float(p.max()), float(level), z)
+
+    def _mask(self, gcc: np.ndarray, fine_index: int) -> np.ndarray:
+        """``gcc`` with the lags of fine grid point ``fine_index`` zeroed on every pair (a found source)."""
+        centre = self._fine_pos[:, fine_index]
+        return np.where(np.abs(self._lag_axis[None, :] - centre[:, None]) <= self._mask_halfwidth, 0.0, gcc)
 
     def srp_fine(self, result_or_gcc: np.ndarray) -> np.ndarray:
         """SRP power on the whole fine grid for a GCC (pairs, lags) - for plots, not for the hot path."""
@@ -574,8 +607,7 @@ class Localizer:
             if k + 1 < cfg.n_sources:
                 if k == 0 and rescan is not None and self._novel_elsewhere(rescan[0], best[1], cos_sep):
                     work, z_scale = rescan[0], np.sqrt(max(rescan[1], 0.0) * self._pairs_in_use())
-                centre = self._fine_pos[:, best[1]]
-                work = np.where(np.abs(self._lag_axis[None, :] - centre[:, None]) <= self._mask_halfwidth, 0.0, work)
+                work = self._mask(work, best[1])
         if srp_map is None:
             srp_map = np.zeros(self.coarse_grid.n_points)
         return srp_map, peaks

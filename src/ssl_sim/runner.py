@@ -150,6 +150,12 @@ class _RecordingLocalizer:
         self.on_result(res)
         return res
 
+    def peak_in_sector(self, result, azimuth, half_width, recording=None):
+        t = time.perf_counter()
+        peak = self._loc.peak_in_sector(result, azimuth, half_width, recording)
+        self.seconds += time.perf_counter() - t
+        return peak
+
 
 def _deg(x: float) -> float:
     return round(math.degrees(x), 2)
