@@ -5,6 +5,7 @@ Fast fidelity and small scenes throughout (the 8-mic acoustic simulation and MuJ
 """
 from __future__ import annotations
 
+import ctypes.util
 import math
 import os
 import subprocess
@@ -222,6 +223,8 @@ def test_audio_observation_flag():
     env.close()
 
 
+@pytest.mark.skipif(ctypes.util.find_library("OSMesa") is None,
+                    reason="the OSMesa library (Debian libosmesa6, installed by `make test`) is not installed")
 def test_rgb_array_rendering_with_osmesa():
     out = _run("""
         import numpy as np

@@ -16,16 +16,19 @@ evaluation helpers (:mod:`.evaluation`).
 
 Rendering: ``render_mode="rgb_array"`` uses a MuJoCo offscreen context. Without a display
 (no ``DISPLAY``/``WAYLAND_DISPLAY``) this package sets ``MUJOCO_GL=osmesa`` (CPU rendering,
-Debian ``libosmesa6``) if nothing set it and mujoco is not imported yet; otherwise set it
-yourself before anything imports mujoco.
+Debian ``libosmesa6``) if nothing set it, mujoco is not imported yet and the OSMesa library is
+installed (with ``MUJOCO_GL=osmesa`` and no OSMesa, ``import mujoco`` itself fails, so the
+environment could not even run unrendered); otherwise set it yourself before anything imports mujoco.
 """
 from __future__ import annotations
 
+import ctypes.util
 import os
 import sys
 
 if ("mujoco" not in sys.modules and "MUJOCO_GL" not in os.environ
-        and not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY")):
+        and not os.environ.get("DISPLAY") and not os.environ.get("WAYLAND_DISPLAY")
+        and ctypes.util.find_library("OSMesa")):
     os.environ["MUJOCO_GL"] = "osmesa"
 
 import gymnasium as gym  # noqa: E402
