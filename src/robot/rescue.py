@@ -122,8 +122,8 @@ class RescueConfig:
     voice_threshold: float = 0.1           # VAD speech-frame fraction of a beam counted as voice (robot.listening;
     #                                        robot.vad.CHUNK_SPEECH_FRACTION = 0.2 separates dry 1 s chunks;
     #                                        reverberant beams of callers 2-4 m away have fewer)
-    voice_scan_deg: float = 0.0            # > 0: a listen whose strongest detection is no voice is also scanned for one,
-    #                                        beams this far apart in azimuth (robot.listening.Listener; hears a caller
+    voice_scan_deg: float = 0.0            # > 0: a listen whose strongest detection is no voice is also scanned for
+    #                                        one, beams this far apart in azimuth (robot.listening.Listener; hears a caller
     #                                        beside a louder machine in 30 of 70 listens instead of 14). Off: at 15 deg,
     #                                        seeds 0-7, light rubble and generator_louder were unchanged, dense_pump 4
     #                                        of 16 as without, half_buried_slab 11 vs 12 of 16 (3 false founds vs 2),
