@@ -123,12 +123,12 @@ class RescueConfig:
     #                                        robot.vad.CHUNK_SPEECH_FRACTION = 0.2 separates dry 1 s chunks;
     #                                        reverberant beams of callers 2-4 m away have fewer)
     voice_scan_deg: float = 0.0            # > 0: a listen whose strongest detection is no voice is also scanned for
-    #                                        one, beams this far apart in azimuth (robot.listening.Listener; hears a caller
-    #                                        beside a louder machine in 30 of 70 listens instead of 14). Off: at 15 deg,
-    #                                        seeds 0-7, light rubble and generator_louder were unchanged, dense_pump 4
-    #                                        of 16 as without, half_buried_slab 11 vs 12 of 16 (3 false founds vs 2),
-    #                                        behind_partition SPL 0.548 vs 0.593; light rubble seeds 16-31 47 vs 46 of
-    #                                        48, SPL 0.601 vs 0.582 (docs/rescue_benchmark.md, "Session 8")
+    #                                        one, beams this far apart in azimuth (robot.listening.Listener: hears a
+    #                                        caller beside a louder machine in 30 of 70 listens instead of 14). Off: at
+    #                                        15 deg, seeds 0-7, light rubble and generator_louder were unchanged,
+    #                                        dense_pump 4 of 16 as without, half_buried_slab 11 vs 12 of 16 (3 false
+    #                                        founds vs 2), behind_partition SPL 0.548 vs 0.593; light rubble seeds 16-31
+    #                                        47 vs 46 of 48, SPL 0.601 vs 0.582 (docs/rescue_benchmark.md, "Session 8")
     require_voice: bool = False            # approach only sources classified victim (not unclassified ones)
     # geometry (shared with the sound map: one source of truth for the array height)
     array_height_m: float = 0.30           # array centre above the floor
