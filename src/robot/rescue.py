@@ -124,7 +124,7 @@ class RescueConfig:
     #                                        reverberant beams of callers 2-4 m away have fewer)
     voice_scan_deg: float = 0.0            # > 0: a listen whose strongest detection is no voice is also scanned for
     #                                        one, beams this far apart in azimuth (robot.listening.Listener: hears a
-    #                                        caller beside a louder machine in 30 of 70 listens instead of 14). Off: at
+    #                                        caller beside a louder machine in 31 of 70 listens instead of 15). Off: at
     #                                        15 deg, seeds 0-7, light rubble and generator_louder were unchanged,
     #                                        dense_pump 4 of 16 as without, half_buried_slab 11 vs 12 of 16 (3 false
     #                                        founds vs 2), behind_partition SPL 0.548 vs 0.593; light rubble seeds 16-31
