@@ -22,27 +22,12 @@ for _v in ("OMP_NUM_THREADS", "OPENBLAS_NUM_THREADS", "MKL_NUM_THREADS"):
 import argparse  # noqa: E402
 import json  # noqa: E402
 import math  # noqa: E402
+import tempfile  # noqa: E402
 from pathlib import Path  # noqa: E402
 
 import numpy as np  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
-
-
-class _Replay:
-    """One listen's audio as an ``AudioSource`` (the listener reads it once)."""
-
-    n_channels = 8
-
-    def __init__(self, samples: np.ndarray, fs: int) -> None:
-        self.samples, self.sample_rate = samples, fs
-
-    def flush(self) -> None:
-        pass
-
-    def read(self, n: int):
-        from robot.hal import AudioBlock
-        return AudioBlock(self.samples[:, :n], 0.0, self.sample_rate)
 
 
 def run_listens(scenario: str, seed: int) -> tuple[list[tuple[np.ndarray, dict]], int]:
@@ -69,19 +54,25 @@ def _az_error_deg(a: float, b_deg: float) -> float:
 
 def score(listens, fs: int, localizer, scan_deg: float, voice_threshold: float, max_distance: float,
           min_active: float) -> dict:
+    """Replays the ``listens`` within ``max_distance`` of a victim through one ``Listener`` (the project's
+    ``WavFileSource`` reading them in turn from a temporary WAV) and counts as the module docstring says."""
+    from scipy.io import wavfile
+
     from robot.hal import ManualClock
     from robot.listening import Listener
+    from robot.replay import WavFileSource
     from ssl_core.geometry import cube8
+    kept = [(x, rec) for x, rec in listens
+            if min(s["distance_m"] for s in rec["sources"] if s["kind"] == "victim") <= max_distance]
     victims: dict[str, list[int]] = {}
-    n = ghosts = voiced_ghosts = 0
-    source = _Replay(np.zeros((8, 0)), fs)
-    listener = Listener(source, ManualClock(), localizer, cube8().positions, voice_threshold, voice_scan_deg=scan_deg)
-    for samples, rec in listens:
-        if min(s["distance_m"] for s in rec["sources"] if s["kind"] == "victim") > max_distance:
-            continue
-        source.samples = samples
-        ev = listener.listen(samples.shape[1] / fs, 0.0, 0.0).evidence
-        n += 1
+    ghosts = voiced_ghosts = 0
+    with tempfile.TemporaryDirectory() as tmp:
+        path = Path(tmp) / "listens.wav"
+        wavfile.write(path, fs, np.concatenate([x for x, _ in kept], axis=1).T.astype(np.float32))
+        listener = Listener(WavFileSource(path, 8, fs), ManualClock(), localizer, cube8().positions,
+                            voice_threshold, voice_scan_deg=scan_deg)
+        heard = [listener.listen(x.shape[1] / fs, 0.0, 0.0).evidence for x, _ in kept]
+    for ev, (_, rec) in zip(heard, kept):
         for e in ev:
             if all(_az_error_deg(e.azimuth, s["azimuth_deg"]) > 15 for s in rec["sources"]):
                 ghosts += 1
@@ -94,7 +85,8 @@ def score(listens, fs: int, localizer, scan_deg: float, voice_threshold: float, 
             row[0] += 1
             row[1] += bool(near)
             row[2] += any(e.speech_fraction >= voice_threshold for e in near)
-    return {"listens": n, "ghosts_per_listen": ghosts / max(n, 1), "voiced_ghosts_per_listen": voiced_ghosts / max(n, 1),
+    n = max(len(kept), 1)
+    return {"listens": len(kept), "ghosts_per_listen": ghosts / n, "voiced_ghosts_per_listen": voiced_ghosts / n,
             "victims": {k: {"listens": v[0], "det_pct": 100 * v[1] / v[0], "voiced_pct": 100 * v[2] / v[0]}
                         for k, v in victims.items()}}
 

@@ -339,35 +339,23 @@ def test_one_listen_hears_the_talker_beside_a_louder_machine_and_gives_the_machi
     assert talker >= ds_talker + 0.5 * talking_s, (talker, ds_talker, talking_s)
 
 
-class _Replay:
-    """An audio source replaying an (8, n) int16 array block by block (the listener's ``AudioSource``)."""
+def _voice_hits(scan_deg, tmp_path):
+    """Over the five rooms in 1 s listens (replayed from WAV files after the settle): (talking listens, those
+    with voice evidence within 15 deg of her azimuth, listens with voice evidence within 15 deg of the
+    machine's, listens)."""
+    from scipy.io import wavfile
 
-    sample_rate, n_channels = FS, 8
-
-    def __init__(self, x, start_s=0):
-        self.x, self.pos = x, int(start_s * FS)
-
-    def flush(self):
-        pass
-
-    def read(self, n):
-        from robot.hal import AudioBlock
-        block = AudioBlock(self.x[:, self.pos:self.pos + n], self.pos / FS, FS)
-        self.pos += n
-        return block
-
-
-def _voice_hits(scan_deg):
-    """Over the five rooms in 1 s listens: (talking listens, those with voice evidence within 15 deg of her
-    azimuth, listens with voice evidence within 15 deg of the machine's, listens)."""
     from robot.hal import ManualClock
     from robot.listening import Listener
+    from robot.replay import WavFileSource
     loc = Localizer(cube8(), LocalizerConfig(n_sources=3, rel_threshold=0.25, noise_suppression=True))
     talking = hits = machine = listens = 0
-    for case in ROOM_CASES:
+    for k, case in enumerate(ROOM_CASES):
         x, directions, she_talks = _room(*case)
-        listener = Listener(_Replay(x, SETTLE_S), ManualClock(), loc, POS, voice_threshold=0.1,
-                            voice_scan_deg=scan_deg)
+        wavfile.write(tmp_path / f"room{k}.wav", FS, x.T)
+        audio = WavFileSource(tmp_path / f"room{k}.wav", 8, FS)
+        audio.seek(SETTLE_S)
+        listener = Listener(audio, ManualClock(), loc, POS, voice_threshold=0.1, voice_scan_deg=scan_deg)
         az = [np.arctan2(d[1], d[0]) for d in directions]
         for talks in she_talks[SETTLE_S: x.shape[1] // FS]:
             voiced = [e.azimuth for e in listener.listen(1.0, 0.0, 0.0).evidence if e.speech_fraction >= 0.1]
@@ -382,12 +370,12 @@ def _voice_hits(scan_deg):
     return talking, hits, machine, listens
 
 
-def test_listen_voice_scan_hears_the_talker_the_srp_map_misses_beside_a_louder_machine():
+def test_listen_voice_scan_hears_the_talker_the_srp_map_misses_beside_a_louder_machine(tmp_path):
     """The five real-recording rooms (machine 6 dB louder, 2 m, RT60 0.6 s) in 1 s listens through the rescue's
     listener (localizer with noise suppression, 3 sources): with the voice scan a voiced detection points at her
     (within 15 deg of azimuth) in more of her talking listens (measured: 31 of 70 against 15), and the machine
     gets no more voiced detections than without it (5 against 6 of 70: her speech leaking into its beam)."""
-    plain, scanned = _voice_hits(0.0), _voice_hits(15.0)
+    plain, scanned = _voice_hits(0.0, tmp_path), _voice_hits(15.0, tmp_path)
     print("talking listens, voiced at her, voiced at the machine, listens: without scan", plain, "with", scanned)
     talking, hits, machine, listens = scanned
     assert hits >= plain[1] + 0.15 * talking, (plain, scanned)

@@ -116,6 +116,7 @@ class Listener:
         if not heard[0] or heard[0][0].speech_fraction < self.voice_threshold:
             extra = self._scanned(block, result, dets)
             if extra:
+                # all beams again, together: which beam owns the speech depends on every beam heard with it
                 scanned = self._evidence(block, dets + extra, self.clock.now(), min_power, extra)
                 # kept only if its beam owns the voice it was added for (else a detection beside it does)
                 if len(scanned[0]) > len(heard[0]) and scanned[0][-1].speech_fraction >= self.voice_threshold:
