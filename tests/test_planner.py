@@ -210,3 +210,19 @@ def test_machine_image_needs_no_voice_and_the_machine_near_or_on_its_bearings():
     assert not pl.machine_image(aside, [pump])                    # 3.6 m from it, heard 90 deg off its bearing
     near = dataclasses.replace(aside, position=np.array([3.0, 1.2, 0.1]))
     assert pl.machine_image(near, [pump])                         # 1.2 m from it
+
+
+def test_an_unclassified_source_heard_once_is_no_target_a_victim_heard_once_is():
+    """One voiceless peak (beside a machine mostly its reflection) is not worth a trip until heard again; one
+    listen with speech is."""
+    g = OccupancyGrid()
+    once = dataclasses.replace(_src(0, (1.5, 0.0), 0.42, SourceClass.UNKNOWN), n_listens=1, n_inliers=1)
+    s, plan, why = Planner().choose_target([once], g, (0.0, 0.0, 0.0), 12.0)
+    assert s is None and plan is None and "no unfound source" in why
+    twice = dataclasses.replace(once, n_listens=2, n_inliers=2)
+    assert Planner().choose_target([twice], g, (0.0, 0.0, 0.0), 12.0)[0].id == 0
+    voiced = dataclasses.replace(once, id=1, victim_probability=0.9, cls=SourceClass.VICTIM)
+    assert Planner().choose_target([once, voiced], g, (0.0, 0.0, 0.0), 12.0)[0].id == 1
+    assert Planner(PlannerConfig(min_unknown_listens=1)).choose_target([once], g, (0.0, 0.0, 0.0), 12.0)[0].id == 0
+    with pytest.raises(ValueError, match="min_unknown_listens"):
+        PlannerConfig(min_unknown_listens=0)

@@ -9,7 +9,7 @@ from robot.hal import DriveStatus
 
 from robot.rescue import Decision, RescueConfig
 from robot.sound_map import SoundMap, SoundMapConfig
-from test_rescue import Det, FakeLocalizer, Result, Source, World, WorldDrive, found_events, make
+from test_rescue import Det, FakeLocalizer, Result, Source, World, WorldDrive, always_speech, found_events, make
 
 H = SoundMapConfig().array_height_m
 
@@ -56,7 +56,7 @@ class EchoLocalizer(FakeLocalizer):
 def _first_find_distance(config):
     caller = Source((2.2, 0.6, 0.1), 64.0)
     w = World([caller], seed=4)
-    return _distance_at_first_find(make(w, config, localizer=EchoLocalizer(w)), w, caller, 60)
+    return _distance_at_first_find(make(w, config, localizer=EchoLocalizer(w), speech=always_speech), w, caller, 60)
 
 
 def _distance_at_first_find(b, w, caller, steps):

@@ -209,6 +209,7 @@ class RescueConfig:
     #                                        every caller; in light rubble seed 0 two callers' rays crossing beside
     #                                        the robot had triangulated into a ghost, rejected after 11 listens with
     #                                        a caller's rays in it)
+    confirm_steep_single: bool = False     # a steep voiced bearing that started a new source: listen again here
     max_victims: int | None = None         # stop after finding this many (None: keep searching)
     # moving
     step_m: float = 0.6                    # longest move between two listens
@@ -504,6 +505,12 @@ class RescueBehaviour:
                     crit = (f"elevation {-steep:.0f} deg (< -{cfg.corroborated_elevation_deg:g}) and level rose "
                             f"{rise:.1f} dB (>= {cfg.level_rise_db:g})")
                     steep_cue = True
+            if cfg.confirm_steep_single and crit is None and ev is not None and s.n_inliers < 2 \
+                    and not near_machine and not echo and coherent and ev.voice_probability >= 0.5 \
+                    and -math.degrees(ev.elevation) >= cfg.found_elevation_deg \
+                    and self._listen_again(s, f"source #{s.id} heard steep ({math.degrees(ev.elevation):+.0f} deg) "
+                                              "with voice in one listen only"):
+                return True
             d = s.distance_to(xy)
             # The map alone is not enough (a wrong triangulation would declare empty floor): the bearing heard
             # now must point down as a mouth on the floor within reach does (elevation supporting).
@@ -591,7 +598,12 @@ class RescueBehaviour:
                 # one 2.4 m away, was reported there, and that caller was then excluded as found). The steep
                 # bearing itself says where she is: where it meets the floor.
                 self._cue.pop(sid, None)
-                s = self.map.source(self.map.add_found(self._floor_point(ev), self.clock.now()))
+                floor = self._floor_point(ev)
+                if self._near_found(floor):
+                    # ... unless that is beside a victim found already: her own voice, not a second one (measured,
+                    # dense_pump seed 7 with min_unknown_listens 2: declared again 0.73 m from a found caller).
+                    continue
+                s = self.map.source(self.map.add_found(floor, self.clock.now()))
                 crit += f"; where this bearing meets the floor (the source it joined is mapped {d:.2f} m away)"
             self._declare_found(s, crit)
             return True
@@ -643,11 +655,13 @@ class RescueBehaviour:
             self.target, self.plan = None, None
         self._emit(Decision.REJECTED, f"source #{s.id}: {why}", {"source": s.id, "position": s.position.tolist()})
 
-    def _near_found(self, s: MapSource) -> bool:
-        """Within ``found_exclusion_m`` of a victim already found: another bearing of it (a reflection, a
-        second track), never a second victim to declare (measured: a duplicate 0.5 m from a found caller)."""
-        return any(o.id != s.id and o.state is SourceState.FOUND
-                   and o.distance_to(s.position) <= self.config.found_exclusion_m for o in self.map.sources)
+    def _near_found(self, s: MapSource | np.ndarray) -> bool:
+        """``s`` (a source, or a world point x, y[, z] m) is within ``found_exclusion_m`` of a victim already
+        found: another bearing of it (a reflection, a second track), never a second victim to declare
+        (measured: a duplicate 0.5 m from a found caller)."""
+        sid, xy = (s.id, s.position) if isinstance(s, MapSource) else (None, s)
+        return any(o.id != sid and o.state is SourceState.FOUND
+                   and o.distance_to(xy) <= self.config.found_exclusion_m for o in self.map.sources)
 
     def _near_machine(self, s: MapSource) -> bool:
         return any(o.id != s.id and o.state is SourceState.REJECTED
