@@ -580,3 +580,20 @@ def test_a_caller_who_pauses_at_its_estimate_is_found_not_rejected_as_a_reflecti
     assert not [e for e in ev if e.decision is Decision.REJECTED], [str(e) for e in ev]
     found = found_events(ev)
     assert len(found) == 1 and math.dist(found[0].data["position"], caller.position[:2]) < 0.3
+
+
+def test_a_voiced_mouth_right_below_heard_once_is_listened_to_again_not_left():
+    """A caller 0.3 m from the robot and 0.2 m below the array (34 deg down: a mouth within reach) heard in the
+    first listen only starts a source of one bearing; the robot listens again where it stands and declares her
+    on the second listen instead of stepping away across that bearing."""
+    caller = Source((0.3, 0.0, 0.1), 62.0)
+    w = World([caller], seed=1)
+    b = make(w, RescueConfig(max_victims=1), speech=always_speech)
+    ev = b.step()
+    assert decisions(ev) == [Decision.HEARD, Decision.NO_TARGET] and "one listen only" in ev[-1].reason
+    ev += b.step()
+    found = found_events(ev)
+    assert len(found) == 1 and "steeper than -30 deg" in found[0].reason
+    assert math.dist(found[0].data["position"], caller.position[:2]) < 0.15
+    assert w.pose() == pytest.approx((0.0, 0.0, 0.0), abs=1e-9)      # it never moved
+    assert not any(any(c.twist) for c in w.drive.commands)

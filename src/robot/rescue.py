@@ -209,7 +209,6 @@ class RescueConfig:
     #                                        every caller; in light rubble seed 0 two callers' rays crossing beside
     #                                        the robot had triangulated into a ghost, rejected after 11 listens with
     #                                        a caller's rays in it)
-    confirm_steep_single: bool = False     # a steep voiced bearing that started a new source: listen again here
     max_victims: int | None = None         # stop after finding this many (None: keep searching)
     # moving
     step_m: float = 0.6                    # longest move between two listens
@@ -505,9 +504,11 @@ class RescueBehaviour:
                     crit = (f"elevation {-steep:.0f} deg (< -{cfg.corroborated_elevation_deg:g}) and level rose "
                             f"{rise:.1f} dB (>= {cfg.level_rise_db:g})")
                     steep_cue = True
-            if cfg.confirm_steep_single and crit is None and ev is not None and s.n_inliers < 2 \
-                    and not near_machine and not echo and coherent and ev.voice_probability >= 0.5 \
-                    and -math.degrees(ev.elevation) >= cfg.found_elevation_deg \
+            # A voiced mouth right below in a bearing that began a source of its own (the caller's map estimate
+            # was off): criteria 1-2 need a second listen of it, so take it here rather than step away across
+            # the bearing (measured, dense_pump seed 11: heard -35 deg down 0.33 m from her, then left).
+            if crit is None and ev is not None and s.n_inliers < 2 and not near_machine and not echo and coherent \
+                    and ev.voice_probability >= 0.5 and -math.degrees(ev.elevation) >= cfg.found_elevation_deg \
                     and self._listen_again(s, f"source #{s.id} heard steep ({math.degrees(ev.elevation):+.0f} deg) "
                                               "with voice in one listen only"):
                 return True
