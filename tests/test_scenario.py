@@ -118,6 +118,23 @@ def test_grid_geodesic_goes_around_a_wall():
     assert FreeSpacePaths(free_room).distance((1, 1), (5, 3), 0.5) == pytest.approx(math.hypot(4, 2) - 0.5, rel=0.03)
 
 
+def test_reachable_floor_near_a_victim_counts_only_floor_the_robot_can_reach():
+    """In the open: the whole success disc. Boxed in by four walls: none. Against one wall (0.4 m thick, its face
+    0.2 m from her): the disc minus the wall and the band the 16 cm bumper keeps off it."""
+    room = Room(size=(6.0, 4.0, 3.0))
+    open_ = FreeSpacePaths(World(room=room, robot_start=(1.0, 1.0, 0.0)))
+    assert open_.reachable_area((1, 1), (4.0, 2.0), 0.75) == pytest.approx(math.pi * 0.75 ** 2, rel=0.03)
+    walls = (Box((4.0, 2.6, 0.5), (1.4, 0.2, 1.0)), Box((4.0, 1.4, 0.5), (1.4, 0.2, 1.0)),
+             Box((3.4, 2.0, 0.5), (0.2, 1.4, 1.0)), Box((4.6, 2.0, 0.5), (0.2, 1.4, 1.0)))
+    boxed = FreeSpacePaths(World(room=room, obstacles=walls, robot_start=(1.0, 1.0, 0.0)))
+    assert boxed.reachable_area((1, 1), (4.0, 2.0), 0.75) == 0.0          # free inside the box, but unreachable
+    wall = FreeSpacePaths(World(room=room, obstacles=(Box((4.0, 2.4, 0.5), (2.0, 0.4, 1.0)),),
+                                robot_start=(1.0, 1.0, 0.0)))
+    d = 0.2 - 0.16                          # from her to the line the robot centre may come up to
+    segment = 0.75 ** 2 * math.acos(d / 0.75) - d * math.sqrt(0.75 ** 2 - d ** 2)   # the disc beyond that line
+    assert wall.reachable_area((1, 1), (4.0, 2.0), 0.75) == pytest.approx(math.pi * 0.75 ** 2 - segment, rel=0.05)
+
+
 def test_cli_run_writes_results(tmp_path, capsys):
     out = tmp_path / "run"
     assert cli_main(["run", "paper_lab", "--seed", "1", "--time-limit", "4", "--out", str(out), "--quiet"]) == 0
