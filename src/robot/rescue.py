@@ -18,6 +18,8 @@ One cycle walks the data path, each stage in its own module:
   it was heard within ``bump_heard_within_s`` and its last bearing pointed ``supporting_elevation_deg`` down
   (a victim under a slab cannot be reached).
   A steep bearing no louder than a shallow one heard from the same spot in its direction is an echo, no cue.
+  A voiced bearing steep enough for (1) that began a source of its own (one listen) is listened to again where
+  the robot stands (criteria 1-2 need two listens of a source).
   The reported position is the map's estimate (for a steep bearing that joined a source mapped farther than
   ``found_exclusion_m``, where that bearing meets the floor); a found source stays found (never declared again).
   At an estimate where the source is heard level (``refute_after_listens``), the close listens refute the far
