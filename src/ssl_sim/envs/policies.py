@@ -8,7 +8,9 @@
   path's next waypoint. Not used from the behaviour: its listen/act timing and motion primitives (the
   environment steps the robot) and its found criteria (the environment declares victims found, and the
   approached source is then marked found in the map). The observation carries no voice evidence, so every
-  source stays unclassified (P(victim) 0.5).
+  source stays unclassified (P(victim) 0.5); the planner therefore takes one heard in a single step for a
+  target (``min_unknown_listens=1``: the behaviour's two listens weigh a voiceless peak against voiced ones,
+  which the observation cannot tell apart).
 
 A policy is a callable ``policy(obs) -> action`` with ``reset()`` at episode start.
 """
@@ -84,7 +86,8 @@ class MapPlanningPolicy:
     robot backs away from it; the next steps plan around it."""
 
     def __init__(self, env_config: EnvConfig = EnvConfig(), motion: MotionConfig = MotionConfig(),
-                 sound_map: SoundMapConfig = SoundMapConfig(), planner: PlannerConfig = PlannerConfig(),
+                 sound_map: SoundMapConfig = SoundMapConfig(),
+                 planner: PlannerConfig = PlannerConfig(min_unknown_listens=1),
                  occupancy: OccupancyConfig = OccupancyConfig()) -> None:
         self.env_config, self.motion_config, self.planner_config = env_config, motion, planner
         self.sound_map_config = replace(sound_map, array_height_m=RobotModelConfig().array_height)
