@@ -140,7 +140,10 @@ def test_cli_run_writes_results(tmp_path, capsys):
     assert cli_main(["run", "paper_lab", "--seed", "1", "--time-limit", "4", "--out", str(out), "--quiet"]) == 0
     data = json.loads((out / "results.json").read_text())
     assert data["scenario"] == "paper_lab" and data["seed"] == 1 and data["time_limit_s"] == 4.0
-    assert "found 0/1" in capsys.readouterr().out
+    # the lab's caller lies in the open: the whole success disc is floor the robot can stand on
+    assert data["victims"][0]["reachable_floor_m2"] == pytest.approx(math.pi * 0.75 ** 2, rel=0.03)
+    printed = capsys.readouterr().out
+    assert "found 0/1" in printed and "m^2 of reachable floor within the success radius" in printed
 
 
 # ---------------------------------------------------------------------------- bad files

@@ -456,7 +456,7 @@ class RescueRun:
                    "straight_line_from_start_m": _r(max(0.0, math.hypot(s.position[0] - start[0],
                                                                         s.position[1] - start[1])
                                                         - sc.success_radius_m)),
-                   "reachable_floor_m2": _r(self.paths.reachable_area(start, s.position, sc.success_radius_m)),
+                   "reachable_floor_m2": _r(self.paths.reachable_area(start, s.position, sc.success_radius_m), 4),
                    "spl": 0.0}
             if i in self.found:
                 leg_start, leg_path = legs[i]
