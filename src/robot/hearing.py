@@ -68,7 +68,7 @@ from __future__ import annotations
 import enum
 import math
 from dataclasses import dataclass
-from typing import Sequence
+from typing import Iterator, Sequence
 
 import numpy as np
 
@@ -420,10 +420,8 @@ def speech_fractions(samples: np.ndarray, mic_positions: np.ndarray, directions:
     hearing = Hearing(mic_positions, sample_rate, HearingConfig(vad_on_s=1.0, vad_period_s=1.0, beam_update_s=block_s),
                       vad=vad)
     tracks = [Track(i, u, np.zeros(3), 1.0, 0.0, 0.0, 0.0, 0.0, 0) for i, u in enumerate(d)]
-    x = as_float_audio(samples)
-    step = max(1, int(round(block_s * SAMPLE_RATE)))
-    for k in range(0, x.shape[-1], step):
-        hearing.update(x[:, k:k + step], tracks, (k + step) / SAMPLE_RATE)
+    for _ in _fed(hearing, samples, tracks, block_s):
+        pass
     return np.array([hearing.speech_fraction(i) for i in range(len(d))])
 
 
@@ -437,13 +435,20 @@ def voice_scan(samples: np.ndarray, mic_positions: np.ndarray, vad: SileroVad | 
     scan"). ``samples``: (n_mics, n) int16 or float full scale 1 at 16 kHz."""
     hearing = Hearing(mic_positions, sample_rate, HearingConfig(vad_on_s=1.0, vad_period_s=1.0, beam_update_s=block_s,
                                                                 scan_step_deg=step_deg), vad=vad)
-    x = as_float_audio(samples)
-    step = max(1, int(round(block_s * SAMPLE_RATE)))
     found = None
-    for k in range(0, x.shape[-1], step):
-        hearing.update(x[:, k:k + step], [], (k + step) / SAMPLE_RATE)
+    for _ in _fed(hearing, samples, [], block_s):
         found = next(iter(hearing.voice_detections()), found)
     return None if found is None else float(found.azimuth)
+
+
+def _fed(hearing: Hearing, samples: np.ndarray, tracks: list, block_s: float) -> Iterator[None]:
+    """Feeds one listen's ``samples`` to ``hearing`` ``block_s`` at a time, as a stream would; yields after each
+    block."""
+    x = as_float_audio(samples)
+    step = max(1, int(round(block_s * SAMPLE_RATE)))
+    for k in range(0, x.shape[-1], step):
+        hearing.update(x[:, k:k + step], tracks, (k + step) / SAMPLE_RATE)
+        yield
 
 
 @dataclass

@@ -483,7 +483,7 @@ class RescueBehaviour:
                 s = self.map.source(sid)
             except KeyError:
                 continue
-            if s.state in (SourceState.FOUND, SourceState.REJECTED) or self._near_found(s):
+            if s.state in (SourceState.FOUND, SourceState.REJECTED) or self._near_found(s.position, s.id):
                 continue
             crit, steep_cue = None, False
             ev = heard_by.get(sid)
@@ -658,12 +658,11 @@ class RescueBehaviour:
             self.target, self.plan = None, None
         self._emit(Decision.REJECTED, f"source #{s.id}: {why}", {"source": s.id, "position": s.position.tolist()})
 
-    def _near_found(self, s: MapSource | np.ndarray) -> bool:
-        """``s`` (a source, or a world point x, y[, z] m) is within ``found_exclusion_m`` of a victim already
-        found: another bearing of it (a reflection, a second track), never a second victim to declare
+    def _near_found(self, xy, source_id: int | None = None) -> bool:
+        """World point ``xy`` (m) is within ``found_exclusion_m`` of a victim already found other than
+        ``source_id``: another bearing of it (a reflection, a second track), never a second victim to declare
         (measured: a duplicate 0.5 m from a found caller)."""
-        sid, xy = (s.id, s.position) if isinstance(s, MapSource) else (None, s)
-        return any(o.id != sid and o.state is SourceState.FOUND
+        return any(o.id != source_id and o.state is SourceState.FOUND
                    and o.distance_to(xy) <= self.config.found_exclusion_m for o in self.map.sources)
 
     def _near_machine(self, s: MapSource) -> bool:
@@ -807,7 +806,8 @@ class RescueBehaviour:
             down = bool(s.history) and -math.degrees(math.asin(max(-1.0, min(1.0, s.history[-1].direction[2])))) \
                 >= cfg.supporting_elevation_deg
             if d <= cfg.bump_found_range_m and off <= math.radians(cfg.bump_ahead_deg) \
-                    and s.state is not SourceState.FOUND and self._approachable(s) and not self._near_found(s) \
+                    and s.state is not SourceState.FOUND and self._approachable(s) \
+                    and not self._near_found(s.position, s.id) \
                     and s.horizontal_sigma_m <= 2 * cfg.found_sigma_m and voiced and down \
                     and self.clock.now() - s.last_time <= cfg.bump_heard_within_s \
                     and (s.cls is SourceClass.VICTIM or not self._near_machine(s)):
