@@ -170,7 +170,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--rows-in", nargs="*", default=(), help="rows files of earlier runs to add to the tables")
     ap.add_argument("--blas", default=None,
                     help="comma list of OPENBLAS_CORETYPE kernels to run every run under ('' = the CPU's own "
-                         "choice; default Haswell where the CPU has AVX2 and FMA)")
+                         "choice; default $OPENBLAS_CORETYPE, else Haswell where the CPU has AVX2 and FMA)")
     ap.add_argument("--worker", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--paths", nargs="*", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -179,7 +179,9 @@ def main(argv: list[str] | None = None) -> int:
     if args.worker:
         worker(args.paths, seeds, args.workers, args.worker)
         return 0
-    kernels = check_kernels(args.blas.split(",") if args.blas is not None else [default_kernel()])
+    # An OPENBLAS_CORETYPE the caller set is kept, not replaced by the default.
+    kernels = check_kernels(args.blas.split(",") if args.blas is not None
+                            else [os.environ.get("OPENBLAS_CORETYPE") or default_kernel()])
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
