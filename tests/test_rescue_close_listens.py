@@ -174,13 +174,23 @@ def test_a_bearing_heard_beside_a_single_ray_joins_it_only_where_they_cross_away
     assert np.hypot(*(m.source(sid).position[:2] - far[:2])) < 0.3
 
 
-def _at_a_ghost_short_of_the_caller(config):
+class SteepLocalizer(FakeLocalizer):
+    """Every bearing heard 3.5 deg steeper than the truth (the floor reflection pulling the SRP-PHAT peak down: the
+    caller behind half_buried_slab's slab was heard 15.2-15.7 deg down where the truth was 12.5)."""
+
+    def locate(self, samples):
+        res = super().locate(samples)
+        return Result([Det(d.azimuth, d.elevation - math.radians(3.5), d.power, d.level_db, d.voice)
+                       for d in res.detections])
+
+
+def _at_a_ghost_short_of_the_caller(config, localizer=FakeLocalizer):
     """The robot 0.3 m from a tight estimate that lies 0.65 m short of the caller on her bearing (as a caller behind
     a slab was mapped at its edge), in a 4 x 4 m room (the search area); returns the robot's true distance to her
     at the first declaration, or None."""
     caller = Source((2.0, 0.0, 0.1), 64.0)
     w = World([caller], start=(1.05, 0.0, 0.0), seed=7)
-    b = make(w, config, coverage=CoverageConfig(area=(-0.5, -2.0, 3.5, 2.0)))
+    b = make(w, config, localizer=localizer(w), coverage=CoverageConfig(area=(-0.5, -2.0, 3.5, 2.0)))
     ghost = np.array([1.35, 0.0, 0.15])
     for origin in ((0.3, -0.9), (0.4, 0.9), (0.0, 0.1)):
         b.map.update([_Ev(ghost, origin)], (*origin, 0.0), 0.0)
@@ -189,13 +199,25 @@ def _at_a_ghost_short_of_the_caller(config):
 
 def test_a_map_estimate_find_needs_a_bearing_within_reach():
     # Heard at -12 deg from 0.95 m: with the old 10 deg the tight estimate 0.3 m away was declared found there.
-    old = _at_a_ghost_short_of_the_caller(RescueConfig(max_victims=1, reach_elevation_deg=10.0))
+    old = _at_a_ghost_short_of_the_caller(RescueConfig(max_victims=1, reach_elevation_deg=10.0,
+                                                       short_estimate_m=10.0))
     assert old is not None and old > 0.75
     # Now it is not declared there; rejected as a reflection after four listens, the estimate does not take her
     # later bearings (which point elsewhere once the robot has left her line), so she is mapped anew and found
     # within reach. (Exploring along her line, away from her, her bearings keep pointing at the rejected place:
     # without the room's walls, exploration west of the start keeps her hidden behind it.)
     new = _at_a_ghost_short_of_the_caller(RescueConfig(max_victims=1))
+    assert new is not None and new <= 0.75
+
+
+def test_a_map_estimate_short_of_the_bearings_range_is_no_find():
+    # Heard 15.4 deg down (truth 11.9) from 0.95 m: within reach by elevation, so without the range check the tight
+    # estimate 0.3 m away was declared found there (truth: beyond the 0.75 m success radius).
+    old = _at_a_ghost_short_of_the_caller(RescueConfig(max_victims=1, short_estimate_m=10.0), SteepLocalizer)
+    assert old is not None and old > 0.75
+    # That bearing meets a mouth 0.1 m above the floor 0.73 m away, past the estimate by more than short_estimate_m:
+    # the estimate is refuted, and she is found within reach.
+    new = _at_a_ghost_short_of_the_caller(RescueConfig(max_victims=1), SteepLocalizer)
     assert new is not None and new <= 0.75
 
 
