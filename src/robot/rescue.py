@@ -11,7 +11,8 @@ One cycle walks the data path, each stage in its own module:
   ``array_height_m`` up: at 30 deg a mouth on the floor is ~0.35 m away), or (2) steeper than
   ``corroborated_elevation_deg`` and its level rose ``level_rise_db`` above the faintest listen of it, or
   (3) the map puts it within ``cue_distance_m`` of the robot with a horizontal 1-sigma under
-  ``cue_sigma_m``, the bearing now points ``reach_elevation_deg`` down and the level rose (supporting cues);
+  ``cue_sigma_m``, the bearing now points ``reach_elevation_deg`` down, meets a mouth ``mouth_height_m`` up no
+  more than ``short_estimate_m`` beyond the estimate, and the level rose (supporting cues);
   (1)-(3) only when the bearing heard now is a strong SRP-PHAT peak (``found_min_power``: direct sound),
   or (4) the bumper fires (or the range sensors stop the move before an obstacle) while driving at it with
   its estimate within ``bump_found_range_m`` and ``bump_ahead_deg`` of the motion, a voice was heard from it,
@@ -22,8 +23,8 @@ One cycle walks the data path, each stage in its own module:
   the robot stands (criteria 1-2 need two listens of a source).
   The reported position is the map's estimate (for a steep bearing that joined a source mapped farther than
   ``found_exclusion_m``, where that bearing meets the floor); a found source stays found (never declared again).
-  At an estimate where the source is heard level (``refute_after_listens``), the close listens refute the far
-  ones that placed it there: the source is re-estimated from them alone, once;
+  At an estimate where the source is heard level or farther than the estimate (``refute_after_listens``), the
+  close listens refute the far ones that placed it there: the source is re-estimated from them alone, once;
 * **plan** (``robot.planner``): the most useful unfound victim (P(victim), recency, path length; interferers
   never) and a path to it around the obstacles learned by touch (``robot.occupancy``); none mapped ->
   explore where a listen would hear most of the floor not yet heard (``robot.coverage``: listens so far, a
@@ -557,8 +558,9 @@ class RescueBehaviour:
                 if ev is not None and sid not in self._restarted \
                         and (-math.degrees(ev.elevation) < cfg.supporting_elevation_deg or short
                              or self._off_estimate_deg(ev, s) > self.map.config.inlier_deg):
-                    # Heard level from its estimate, or pointing past it: a mouth there would be heard steeply
-                    # (>= 20 deg from 0.45 m) and toward it; this one is farther along this bearing. The close
+                    # Heard level from its estimate, too shallow for a mouth there (short), or pointing past it: a
+                    # mouth there would be heard steeply (>= 20 deg from 0.45 m) and toward it; this one is farther
+                    # along this bearing. The close
                     # listens outweigh the far ones that placed it here (two callers' bearings crossing, a
                     # reflection): re-estimate it from them alone, once.
                     n = self._level_at[sid] = self._level_at.get(sid, 0) + 1
