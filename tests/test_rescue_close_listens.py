@@ -216,7 +216,7 @@ def test_a_map_estimate_short_of_the_bearings_range_is_no_find():
     old = _at_a_ghost_short_of_the_caller(RescueConfig(max_victims=1, short_estimate_m=10.0), SteepLocalizer)
     assert old is not None and old > 0.75
     # That bearing meets a mouth 0.1 m above the floor 0.73 m away, past the estimate by more than short_estimate_m:
-    # the estimate is refuted, and she is found within reach.
+    # no find there; she is found within reach.
     new = _at_a_ghost_short_of_the_caller(RescueConfig(max_victims=1), SteepLocalizer)
     assert new is not None and new <= 0.75
 

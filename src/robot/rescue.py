@@ -23,8 +23,8 @@ One cycle walks the data path, each stage in its own module:
   the robot stands (criteria 1-2 need two listens of a source).
   The reported position is the map's estimate (for a steep bearing that joined a source mapped farther than
   ``found_exclusion_m``, where that bearing meets the floor); a found source stays found (never declared again).
-  At an estimate where the source is heard level or farther than the estimate (``refute_after_listens``), the
-  close listens refute the far ones that placed it there: the source is re-estimated from them alone, once;
+  At an estimate where the source is heard level (``refute_after_listens``), the close listens refute the far
+  ones that placed it there: the source is re-estimated from them alone, once;
 * **plan** (``robot.planner``): the most useful unfound victim (P(victim), recency, path length; interferers
   never) and a path to it around the obstacles learned by touch (``robot.occupancy``); none mapped ->
   explore where a listen would hear most of the floor not yet heard (``robot.coverage``: listens so far, a
@@ -219,10 +219,12 @@ class RescueConfig:
     #                                        bearing heard now gives: (array_height_m - this) / tan(depression)
     short_estimate_m: float = 0.35         # that range farther than the map estimate by more than this: the estimate
     #                                        is short of her (the listens that placed it came around rubble), no
-    #                                        criterion 3, and at the estimate it is refuted like a level bearing.
-    #                                        Measured (seeds 0-15, five scenarios, 22 finds by criterion 3): the two
-    #                                        false ones (half_buried_slab seeds 4, 5, 0.7-0.8 m from the caller behind
-    #                                        the slab) were 0.40-0.47 m short, every true one 0.29 m or less
+    #                                        criterion 3 (she is found by a steeper bearing farther on, or the estimate
+    #                                        is rejected as a reflection). Measured (seeds 0-15, five scenarios, 22
+    #                                        finds by criterion 3): the two false ones (half_buried_slab seeds 4, 5,
+    #                                        0.7-0.8 m from the caller behind the slab) were 0.40-0.47 m short, every
+    #                                        true one 0.29 m or less. Counting such a bearing as heard level too (to
+    #                                        re-estimate the source) lost light rubble seed 6 a victim (Haswell)
     max_victims: int | None = None         # stop after finding this many (None: keep searching)
     # moving
     step_m: float = 0.6                    # longest move between two listens
@@ -556,11 +558,10 @@ class RescueBehaviour:
                 # do not hear it at all end the wait after twice as many (after as many: light rubble seeds 0-15,
                 # 180 s, 35 of 48 callers found instead of 40, same session).
                 if ev is not None and sid not in self._restarted \
-                        and (-math.degrees(ev.elevation) < cfg.supporting_elevation_deg or short
+                        and (-math.degrees(ev.elevation) < cfg.supporting_elevation_deg
                              or self._off_estimate_deg(ev, s) > self.map.config.inlier_deg):
-                    # Heard level from its estimate, too shallow for a mouth there (short), or pointing past it: a
-                    # mouth there would be heard steeply (>= 20 deg from 0.45 m) and toward it; this one is farther
-                    # along this bearing. The close
+                    # Heard level from its estimate, or pointing past it: a mouth there would be heard steeply
+                    # (>= 20 deg from 0.45 m) and toward it; this one is farther along this bearing. The close
                     # listens outweigh the far ones that placed it here (two callers' bearings crossing, a
                     # reflection): re-estimate it from them alone, once.
                     n = self._level_at[sid] = self._level_at.get(sid, 0) + 1
