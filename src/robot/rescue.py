@@ -188,7 +188,8 @@ class RescueConfig:
     #                                        half_buried_slab's slab from 0.82 m, estimated 0.79 m ahead: the only
     #                                        criterion-4 find in 80 runs, five scenarios, seeds 0-15, session 11), yet
     #                                        above 0.65 m (0.6 lost a caller behind a block bumped 0.65 m from her,
-    #                                        session 6). No run of seeds 0-15 (six scenarios, Haswell) changed against 0.8
+    #                                        session 6). No run of seeds 0-15 (six scenarios, Haswell) changed
+    #                                        against 0.8
     bump_ahead_deg: float = 35.0           # ... and this close to the direction of motion
     bump_heard_within_s: float = 10.0      # ... and heard this recently (2-3 listen cycles: a caller is heard in most;
     #                                        a mirror image beyond a wall, unheard for 25 s, was "found" by bumping
