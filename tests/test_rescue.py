@@ -453,6 +453,8 @@ def test_config_errors_name_the_field():
         RescueConfig(max_victims=0)
     with pytest.raises(ValueError, match="RescueConfig.voice_scan_deg"):
         RescueConfig(voice_scan_deg=-15.0)
+    with pytest.raises(ValueError, match="RescueConfig.mouth_height_m: expected below array_height_m"):
+        RescueConfig(array_height_m=0.08)
     w = World([])
     with pytest.raises(ValueError, match="geometry: 8 microphones but the audio source has 4"):
         make(w, audio=FakeAudio(w.clock, n_channels=4), geometry=cube8())

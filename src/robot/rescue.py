@@ -256,6 +256,9 @@ class RescueConfig:
             raise ValueError("RescueConfig.found_elevation_deg / corroborated_elevation_deg: expected 0 < deg < 90")
         if not self.reach_elevation_deg < 90:
             raise ValueError(f"RescueConfig.reach_elevation_deg: expected 0 <= deg < 90, got {self.reach_elevation_deg}")
+        if not self.mouth_height_m < self.array_height_m:
+            raise ValueError(f"RescueConfig.mouth_height_m: expected below array_height_m = {self.array_height_m} m, "
+                             f"got {self.mouth_height_m}")
         if not 0 <= self.voice_threshold <= 1:
             raise ValueError(f"RescueConfig.voice_threshold: expected 0..1, got {self.voice_threshold}")
         if not 0 <= self.voice_scan_deg <= 90:
@@ -532,13 +535,12 @@ class RescueBehaviour:
                                               "with voice in one listen only"):
                 return True
             d = s.distance_to(xy)
-            short = ev is not None and self._bearing_range(ev) > d + cfg.short_estimate_m
             # The map alone is not enough (a wrong triangulation would declare empty floor): the bearing heard
             # now must point down as a mouth on the floor within reach does (elevation supporting).
             if crit is None and d <= cfg.cue_distance_m and s.horizontal_sigma_m <= cfg.cue_sigma_m \
                     and s.n_inliers >= 3 and s.triangulated and not near_machine and coherent and not echo \
-                    and not short \
                     and -math.degrees(ev.elevation) >= cfg.reach_elevation_deg \
+                    and self._bearing_range(ev, cfg.mouth_height_m) <= d + cfg.short_estimate_m \
                     and ev.level_db - min(r.level_db for r in s.history) >= cfg.supporting_rise_db:
                 crit = (f"map estimate {d:.2f} m away (<= {cfg.cue_distance_m:g}), +- "
                         f"{s.horizontal_sigma_m:.2f} m from {s.n_inliers} listens")
@@ -641,19 +643,16 @@ class RescueBehaviour:
         cos = float(u @ v) / max(float(np.linalg.norm(u) * np.linalg.norm(v)), 1e-12)
         return math.degrees(math.acos(max(-1.0, min(1.0, cos))))
 
-    def _bearing_range(self, ev: ListenEvidence) -> float:
-        """Horizontal range (m) at which a bearing heard now meets a mouth ``mouth_height_m`` above the floor
-        (inf for one not pointing below it; nan, never farther than anything, for a mouth above the array)."""
-        h = self.config.array_height_m - self.config.mouth_height_m
-        if h <= 0:
-            return math.nan
+    def _bearing_range(self, ev: ListenEvidence, height_m: float) -> float:
+        """Horizontal range (m) at which a bearing heard now meets the height ``height_m`` (m above the floor,
+        below the array); inf for a bearing not pointing below the horizon."""
+        h = self.config.array_height_m - height_m
         return h / math.tan(-ev.elevation) if ev.elevation < 0 else math.inf
 
     def _floor_point(self, ev: ListenEvidence) -> np.ndarray:
         """Where a bearing heard now (pointing down) meets the map's prior source height: world (x, y, z) m."""
         x, y, yaw = self.pose
-        h = self.config.array_height_m - self.map.config.source_height_m
-        r = h / max(math.tan(-ev.elevation), 1e-3)
+        r = self._bearing_range(ev, self.map.config.source_height_m)   # finite: called for steep bearings only
         a = yaw + ev.azimuth
         return np.array([x + r * math.cos(a), y + r * math.sin(a), self.map.config.source_height_m])
 
