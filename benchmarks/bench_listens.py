@@ -34,7 +34,7 @@ def run_listens(scenario: str, seed: int) -> tuple[list[tuple[np.ndarray, dict]]
     """(audio, truth record) of every listen of one run, and the sample rate."""
     from ssl_sim.runner import RescueRun
     from ssl_sim.scenario import load_scenario
-    run = RescueRun(load_scenario(ROOT / "scenarios" / f"{scenario}.toml").with_overrides(seed=seed))
+    run = RescueRun(load_scenario(ROOT / "src" / "ssl_sim" / "scenarios" / f"{scenario}.toml").with_overrides(seed=seed))
     captured: list[np.ndarray] = []
     locate = run.localizer.locate
 
@@ -102,7 +102,7 @@ def main() -> None:
     from ssl_core.geometry import cube8
     from ssl_core.localizer import Localizer
     from ssl_sim.scenario import load_scenario
-    sc = load_scenario(ROOT / "scenarios" / f"{args.scenario}.toml")
+    sc = load_scenario(ROOT / "src" / "ssl_sim" / "scenarios" / f"{args.scenario}.toml")
     a, b = (int(v) for v in args.seeds.split(":"))
     listens, fs = [], sc.localizer.fs
     for seed in range(a, b):

@@ -1,6 +1,6 @@
 """Odometry drift of the rescue behaviour in light rubble: gyro-aided vs wheels alone, against MuJoCo's truth.
 
-Each seed runs ``scenarios/light_rubble_three.toml`` for 200 simulated seconds (the behaviour keeps exploring after
+Each seed runs ``ssl_sim/scenarios/light_rubble_three.toml`` for 200 simulated seconds (the behaviour keeps exploring after
 its last find, so every run lasts the whole time, bumps and recoveries included; ``ssl_sim.runner.odometry_drift``).
 At the end: the behaviour's gyro-aided pose and a wheels-only odometry fed the same encoder readings, each against
 the true pose; the simulated gyro's bias (it drifts) and the odometry's standstill estimate of it. Seeds run one

@@ -80,7 +80,7 @@ def worker(paths: list[str], seeds: list[int], workers: int, out: str) -> None:
 
 # ----------------------------------------------------------------------------- driver side
 def _scenario_paths(tmp: Path, old: bool, only: list[str] | None = None) -> list[str]:
-    names = SCENARIOS + [n for n in OPTIONAL if (ROOT / "scenarios" / f"{n}.toml").exists()]
+    names = SCENARIOS + [n for n in OPTIONAL if (ROOT / "src" / "ssl_sim" / "scenarios" / f"{n}.toml").exists()]
     if only:
         unknown = sorted(set(only) - set(names))
         if unknown:
@@ -88,7 +88,7 @@ def _scenario_paths(tmp: Path, old: bool, only: list[str] | None = None) -> list
         names = [n for n in names if n in only]
     out = []
     for n in names:
-        src = ROOT / "scenarios" / f"{n}.toml"
+        src = ROOT / "src" / "ssl_sim" / "scenarios" / f"{n}.toml"
         if not old:
             out.append(str(src))
             continue
@@ -195,7 +195,7 @@ def main(argv: list[str] | None = None) -> int:
             else:
                 base = tmp / "baseline"
                 base.mkdir()
-                # the whole tree: the code finds its scenes and sounds beside src (models/, data/)
+                # the whole tree: the code finds its scenes and sounds beside src (models/, data/ in older trees)
                 arch = subprocess.run(["git", "-C", str(ROOT), "archive", args.baseline], check=True,
                                       capture_output=True).stdout
                 subprocess.run(["tar", "-x", "-C", str(base)], input=arch, check=True)

@@ -1,7 +1,7 @@
 """Wall-clock cost of a whole rescue run per simulated second, split into physics, acoustics,
 localization and the rest (behaviour logic incl. voice scoring, truth bookkeeping).
 
-Runs ``scenarios/light_rubble_three.toml`` (three callers in light rubble) headless, without
+Runs ``ssl_sim/scenarios/light_rubble_three.toml`` (three callers in light rubble) headless, without
 rerun logging, on one core (the run is single-threaded; BLAS threads are capped at 1 before numpy
 loads). Instrumentation is ``time.perf_counter`` around the three parts (see ``ssl_sim.runner``):
 physics = MuJoCo stepping in clock sleeps and audio reads, acoustics = rendering the microphone

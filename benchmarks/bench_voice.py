@@ -1,4 +1,4 @@
-"""Voice activity detectors side by side on the real-sound data set's TEST part (data/sounds).
+"""Voice activity detectors side by side on the real-sound data set's TEST part (ssl_sim/sounds).
 
 Per category: the share of labelled 1 s chunks (hop 0.5 s) called speech (recall for speech,
 false-alarm rate for the rest), then precision/recall over all categories; for Silero VAD
@@ -180,7 +180,7 @@ def _hearing_cost(seconds: float, repeats: int) -> dict:
 
 
 def room_frontends(seconds: int = 16) -> dict:
-    """Which signal lets Silero hear the talker beside a machine 6 dB louder (RT60 0.6 s, data/sounds
+    """Which signal lets Silero hear the talker beside a machine 6 dB louder (RT60 0.6 s, ssl_sim/sounds
     ROOM_CASES): per front end, the share of her talking seconds (after 2 s) called speech in the signal
     toward her, and of all seconds called speech in the signal toward the machine (her leak); then the
     robot.hearing classification (hand-made tracks at the true directions)."""
@@ -260,7 +260,7 @@ def main() -> None:
         f"R {summary[m]['speech_recall']:.2f} P {summary[m]['precision']:.2f} FA {summary[m]['false_alarm_rate']:.3f}"
         for m in names) + " |")
     room = room_frontends()
-    print("room RT60 0.6 s, machine 6 dB louder, 5 cases (data/sounds ROOM_CASES), seconds after the first 2:")
+    print("room RT60 0.6 s, machine 6 dB louder, 5 cases (ssl_sim/sounds ROOM_CASES), seconds after the first 2:")
     print("| front end | her talking seconds heard as speech | seconds speech heard toward the machine |")
     print("|---|---|---|")
     for k, (her, mach) in room.items():

@@ -1,7 +1,7 @@
 """What listening while driving costs: localization error of one 1 s block heard while the robot drives
 sideways past the paper's caller, against driving speed, with and without the robot's own motor noise.
 
-Set-up: ``scenarios/paper_lab.toml`` (empty lab, RT60 0.5 s, 30 dB SPL ambient, caller 1.5 m ahead at
+Set-up: ``ssl_sim/scenarios/paper_lab.toml`` (empty lab, RT60 0.5 s, 30 dB SPL ambient, caller 1.5 m ahead at
 -4 deg calling continuously at 62.5 dB SPL at 1 m); the MuJoCo robot accelerates for 0.5 s, then the
 next 1 s of audio is localized (``ssl_core`` Localizer, the scenario's settings, one source). Truth: the
 caller's direction in the array frame at the middle of the block. Speeds: body twist (0, v, 0)

@@ -38,7 +38,7 @@ def main(argv: list[str] | None = None) -> dict:
     ap.add_argument("--max-steps", type=int, default=150, help="time limit in steps (0.85 s each)")
     ap.add_argument("--fidelity", choices=("fast", "full"), default="fast")
     ap.add_argument("--n-victims", type=int, default=1)
-    ap.add_argument("--scenario", default=None, help="a scenarios/*.toml name or path instead of generated scenes")
+    ap.add_argument("--scenario", default=None, help="a ssl_sim/scenarios/*.toml name or path instead of generated scenes")
     ap.add_argument("--out", type=Path, default=OUT)
     args = ap.parse_args(argv)
     if args.episodes < 1 or args.max_steps < 1:

@@ -1,8 +1,8 @@
-"""Build data/sounds/: real recorded speech and real non-speech sounds from Debian packages.
+"""Build src/ssl_sim/sounds/: real recorded speech and real non-speech sounds from Debian packages.
 
 Reproducible: downloads the packages with ``apt-get download`` (needs ``apt-get update`` once),
 extracts them with ``dpkg-deb -x``, cuts/concatenates and resamples with sox to 16 kHz mono
-16-bit WAV, and writes ``data/sounds/PROVENANCE`` (one tab-separated row per output file:
+16-bit WAV, and writes ``src/ssl_sim/sounds/PROVENANCE`` (one tab-separated row per output file:
 source package, paths inside it, license, speaker sex, content).
 
     python scripts/build_sound_dataset.py [--work /tmp/sounddeb]
@@ -22,7 +22,7 @@ import numpy as np
 from scipy.io import wavfile
 
 ROOT = Path(__file__).resolve().parents[1]
-OUT = ROOT / "data" / "sounds"
+OUT = ROOT / "src" / "ssl_sim" / "sounds"
 FS = 16000
 
 AST = "usr/share/asterisk/sounds"

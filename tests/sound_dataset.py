@@ -1,4 +1,4 @@
-"""The real-sound data set (data/sounds, see its PROVENANCE) cut into labelled 1 s chunks.
+"""The real-sound data set (ssl_sim/sounds, see its PROVENANCE) cut into labelled 1 s chunks.
 
 Truth is independent of any detector: the chunk's file category (speech/shouts vs the
 non-speech categories) plus an energy test for the speech files, so that a 1 s chunk that is
@@ -13,7 +13,7 @@ from pathlib import Path
 import numpy as np
 from scipy.io import wavfile
 
-DATA = Path(__file__).resolve().parents[1] / "data" / "sounds"
+from ssl_sim.resources import SOUNDS_DIR as DATA
 SPEECH_CATEGORIES = ("speech", "shouts")
 FS = 16000
 CHUNK_S, HOP_S = 1.0, 0.5

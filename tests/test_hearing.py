@@ -1,6 +1,6 @@
 """robot.hearing: MPDR beams toward tracks, VAD per beam, per-track voice probability; and the
 streaming STFT / MPDR of ssl_core.beamform. Truth: plane waves of known direction, and a simulated
-reverberant room with real recordings (data/sounds test part) at known positions."""
+reverberant room with real recordings (ssl_sim/sounds test part) at known positions."""
 from __future__ import annotations
 
 import functools

@@ -1,4 +1,4 @@
-"""Voice activity detection (robot.vad, Silero VAD via onnxruntime) on REAL recordings (data/sounds,
+"""Voice activity detection (robot.vad, Silero VAD via onnxruntime) on REAL recordings (ssl_sim/sounds,
 see its PROVENANCE) and on the simulator's procedural victim and machine sounds."""
 from __future__ import annotations
 

@@ -1,10 +1,10 @@
 """Voice activity detection: Silero VAD v6 (a small CNN + LSTM speech detector) run by onnxruntime.
 
-Chosen by measurement on ``data/sounds`` (``benchmarks/bench_voice.py``, README "Telling a victim
+Chosen by measurement on ``ssl_sim/sounds`` (``benchmarks/bench_voice.py``, README "Telling a victim
 from a machine") over WebRTC's VAD and the old hand-made ``benchmarks/old_voice_score.py's voice_likeness`` score.
-The model file ``models/silero_vad_op18_ifless.onnx`` (stored gzip-compressed, ``.onnx.gz``: 1.9 MB instead of
+The model file ``ssl_sim/models/silero_vad_op18_ifless.onnx`` (stored gzip-compressed, ``.onnx.gz``: 1.9 MB instead of
 2.8 MB in the repository) is copied unchanged from the ``silero-vad``
-6.2.3 wheel (MIT, ``models/silero_vad.LICENSE``; sha256 7671cd04...bd28): that package itself
+6.2.3 wheel (MIT, ``ssl_sim/models/silero_vad.LICENSE``; sha256 7671cd04...bd28): that package itself
 requires torch, which the Raspberry Pi does not need for an ONNX model. It is the wheel's dual-rate
 "ifless" export (one ``If`` node only, choosing the 16 or 8 kHz net by ``sr``): at 16 kHz its probabilities
 equal those of the 16 kHz-only export (``silero_vad_16k_op15.onnx``, used before) within 5e-7, and it also
@@ -65,7 +65,7 @@ FRAME = 512          # samples (32 ms) per model call and stream at 16 kHz
 # per rate: samples per frame (32 ms) and samples of the previous frame the model sees in front of it
 _FRAMING = {16000: (FRAME, 64), 8000: (256, 32)}
 SPEECH_THRESHOLD = 0.5  # frame probability counted as speech (Silero's own default)
-# A 1 s chunk is speech when >= 20 % of its frames are: on the data/sounds dev part every value tried
+# A 1 s chunk is speech when >= 20 % of its frames are: on the ssl_sim/sounds dev part every value tried
 # from 0.05 to 0.3 separated speech from non-speech perfectly; 0.2 lies inside that range.
 CHUNK_SPEECH_FRACTION = 0.2
 _HIDDEN = 128        # the LSTM's state size (h and c per stream)

@@ -1,6 +1,6 @@
 """``make demo``: the default rescue scenario, headless, end to end.
 
-The simulated robot (MuJoCo) stands in the paper's empty lab (``scenarios/paper_lab.toml`` on the
+The simulated robot (MuJoCo) stands in the paper's empty lab (``ssl_sim/scenarios/paper_lab.toml`` on the
 shipped ``empty_lab`` scene); a person lying on the floor 1.5 m away calls for help. The very code
 that would run on the real robot - ``robot.rescue.RescueBehaviour`` with the ``ssl_core`` SRP-PHAT
 localizer - listens through the simulated 8-microphone cube (acoustic simulation at the MuJoCo

@@ -3,7 +3,7 @@
 A scenario says where (scene), who calls for help (victims), what else is heard (interferers,
 ambient noise), how the robot behaves (``RescueConfig`` fields), how it localizes
 (``LocalizerConfig`` fields), and for how long. Units SI, world frame (``ssl_sim.world``), angles
-of the robot start in radians. Example (``scenarios/paper_lab.toml``)::
+of the robot start in radians. Example (``ssl_sim/scenarios/paper_lab.toml``)::
 
     name = "paper_lab"
     description = "The paper's empty lab, one caller 1.5 m ahead"
@@ -74,10 +74,9 @@ from ssl_sim.acoustics.voices import SPEAKERS, VICTIM_SOUNDS, continuous_voice, 
 from ssl_sim.physics.robot_model import RobotModelConfig
 from ssl_sim.physics.scene_gen import PRESETS, generate_world, reachable_victims
 from ssl_sim.physics.scenes import load_scene, scene_names
+from ssl_sim.resources import SCENARIOS_DIR
 from ssl_sim.world import VictimSite, World
 
-#: Repository ``scenarios/`` directory.
-SCENARIOS_DIR = Path(__file__).resolve().parents[2] / "scenarios"
 DEFAULT_SCENARIO = "paper_lab"
 
 VICTIM_SOUND_KINDS = (*VICTIM_SOUNDS, "continuous", "file")

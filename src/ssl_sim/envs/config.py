@@ -53,7 +53,7 @@ class RewardConfig:
 class EnvConfig:
     """Everything that defines an ``SSLRescue-v0`` task.
 
-    World, in order of precedence: ``scenario`` (a ``scenarios/*.toml`` name or path, via
+    World, in order of precedence: ``scenario`` (a ``ssl_sim/scenarios/*.toml`` name or path, via
     ``ssl_sim.scenario``: its scene, victims, voices, noise, acoustics and success radius), else
     ``scene`` (a named scene or World TOML; its victim sites call with ``victim_sound``), else
     the rubble generator ``rubble`` with ``n_victims`` (if set) and ``scene_seed`` (None: a new

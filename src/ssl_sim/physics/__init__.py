@@ -3,7 +3,7 @@
 - ``robot_model``: the robot as an ``MjSpec`` (``RobotModelConfig``, ``add_robot``, ``robot_spec``)
 - ``scene_gen``:   seeded rubble generator -> ``ssl_sim.world.World`` (``RubbleConfig``, ``generate_world``)
 - ``world_mjcf``:  ``World`` -> MuJoCo scene (``world_spec``, ``world_to_mjcf``)
-- ``scenes``:      named scenes in ``models/scenes/*.toml`` (``load_scene``, ``save_scene``)
+- ``scenes``:      named scenes in ``ssl_sim/models/scenes/*.toml`` (``load_scene``, ``save_scene``)
 - ``sim_robot``:   ``SimRobot`` (twist in; pose, encoders, IMU, mics, contacts out)
 - ``sim_drive``:   ``robot.hal`` backends ``SimDriveBase`` and ``SimClock``
 """

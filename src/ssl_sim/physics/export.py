@@ -1,7 +1,7 @@
-"""Write the shipped model files under ``models/`` from the Python sources of truth.
+"""Write the shipped model files under ``ssl_sim/models/`` from the Python sources of truth.
 
-``python -m ssl_sim.physics.export`` regenerates ``models/omni_robot.xml`` and, for each
-named scene, ``models/scenes/<name>.toml`` (World data) and ``<name>.xml`` (MuJoCo scene).
+``python -m ssl_sim.physics.export`` regenerates ``ssl_sim/models/omni_robot.xml`` and, for each
+named scene, ``ssl_sim/models/scenes/<name>.toml`` (World data) and ``<name>.xml`` (MuJoCo scene).
 """
 from __future__ import annotations
 

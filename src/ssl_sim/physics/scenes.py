@@ -1,4 +1,4 @@
-"""Named scenes (``models/scenes/*.toml``, World data) and World <-> TOML.
+"""Named scenes (``ssl_sim/models/scenes/*.toml``, World data) and World <-> TOML.
 
 A scene file is ``World.to_dict()`` in TOML: top-level ``name``, ``seed``,
 ``robot_start = [x, y, yaw]``, a ``[room]`` table and ``[[obstacles]]`` /
@@ -11,9 +11,8 @@ import tomllib
 from pathlib import Path
 
 from ssl_sim.world import World
+from ssl_sim.resources import MODELS_DIR
 
-#: Repository ``models/`` directory (the project runs from its source tree).
-MODELS_DIR = Path(__file__).resolve().parents[3] / "models"
 SCENES_DIR = MODELS_DIR / "scenes"
 
 
