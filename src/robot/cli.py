@@ -26,12 +26,14 @@ from robot.odometry import GyroFusionConfig, TravelConfig
 from robot.planner import PlannerConfig
 from robot.rescue import RescueBehaviour, RescueConfig, RescueEvent
 from robot.sound_map import SoundMapConfig
+from ssl_core.version import version
 
 PROG = "ssl-robot"
 
 
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog=PROG, description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--version", action="version", version=f"%(prog)s {version()}")
     drive = p.add_mutually_exclusive_group()
     drive.add_argument("--serial", metavar="PORT", help="drive MCU serial port (e.g. /dev/ttyUSB0) or pyserial URL")
     drive.add_argument("--dry-run", action="store_true", help="do not move: log commands, integrate ideal odometry")

@@ -29,6 +29,7 @@ from ssl_core.detection import Detection
 from ssl_core.geometry import get_array
 from ssl_core.localizer import Localizer, LocalizerConfig
 from ssl_core.tracking import TRACKING_MIN_SIGNIFICANCE, Track, Tracker
+from ssl_core.version import version
 from ssl_core.wav_blocks import read_blocks, wav_info
 
 EXIT_OK, EXIT_NO_SOURCE, EXIT_BAD_INPUT = 0, 1, 2
@@ -42,6 +43,7 @@ class _BadInput(Exception):
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="ssl-locate", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--version", action="version", version=f"%(prog)s {version()}")
     p.add_argument("wav", help="multichannel WAV file (one channel per microphone)")
     p.add_argument("--array", default="cube8", help="array preset (cube8, cube8_corners) or .toml/.json geometry")
     p.add_argument("--sources", type=int, default=1, help="maximum number of sources to report (>= 1)")

@@ -16,6 +16,7 @@ import sys
 from pathlib import Path
 
 from robot.interrupt import deferred_sigint
+from ssl_core.version import version
 
 # The scenario, runner and viewer modules are imported inside the commands: they take 1-2 s to import, and
 # a Ctrl-C meanwhile must already find the handler of main() (see robot.interrupt).
@@ -96,6 +97,7 @@ def build_parser() -> argparse.ArgumentParser:
 
     p = argparse.ArgumentParser(prog="ssl-rescue", description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
+    p.add_argument("--version", action="version", version=f"%(prog)s {version()}")
     sub = p.add_subparsers(dest="command", required=True)
 
     r = sub.add_parser("run", help="run one scenario headlessly and write results.json")
