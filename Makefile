@@ -37,8 +37,11 @@ test: $(STAMP_TEST) system-deps
 experiments: $(STAMP_RUN)
 	$(PY) -m experiments.run_all
 
-bench: $(STAMP_TEST)
+# Every benchmark with its default arguments (hours on 2 cores: the rescue table and the hearing table are the
+# longest); each writes benchmarks/results/<name>.json, then docs/results.md is rendered from them.
+bench: $(STAMP_TEST) system-deps
 	for b in benchmarks/bench_*.py; do echo "== $$b"; $(PY) $$b || exit 1; done
+	$(PY) tools/write_results.py
 
 clean:
 	rm -rf $(VENV) build dist src/*.egg-info .pytest_cache

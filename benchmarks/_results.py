@@ -82,3 +82,66 @@ def write_result(name: str, figures: Mapping[str, float], tables: Mapping[str, s
     path.write_text(json.dumps(doc, indent=1, default=float) + "\n")
     print(json.dumps({"benchmark": name, "figures": doc["figures"], "load_avg": doc["load_avg"]}, default=float))
     return path
+
+
+#: ``--check`` fails when a figure is this many times worse than the stored one (a shared machine's noise is
+#: 10-30 %; a regression worth a person's look is larger).
+CHECK_FACTOR = 1.5
+
+
+def add_check_option(parser) -> None:
+    """Add ``--check`` to a speed benchmark's argparse parser."""
+    parser.add_argument("--check", action="store_true",
+                        help=f"compare with the figures stored in benchmarks/results/ and exit 1 if one is more than "
+                             f"{CHECK_FACTOR}x worse (the stored file is left unchanged)")
+
+
+def check_result(name: str, figures: Mapping[str, float], better: Mapping[str, str],
+                 factor: float = CHECK_FACTOR, results_dir: str | Path | None = None) -> int:
+    """Compare ``figures`` with ``<results_dir>/<name>.json``; print one line per figure; return an exit code.
+
+    ``better`` names the figures checked and which way is better: ``"lower"`` for a cost (CPU ms, seconds),
+    ``"higher"`` for a rate (x real time, steps per second). 0 = every checked figure within ``factor`` of the
+    stored one, 1 = at least one worse by more, 2 = nothing stored to compare with (or a figure missing).
+    """
+    path = (Path(results_dir) if results_dir is not None else RESULTS_DIR) / f"{name}.json"
+    if not path.exists():
+        print(f"--check: no stored result {path}; run the benchmark without --check first", file=sys.stderr)
+        return 2
+    stored = json.loads(path.read_text())
+    args = [a for a in sys.argv[1:] if a != "--check"]
+    if stored.get("argv", []) != args:
+        print(f"--check: {path.name} was measured with arguments {stored.get('argv')}, not {args}: run --check with "
+              f"the stored arguments (or store a figure for these)", file=sys.stderr)
+        return 2
+    old = stored.get("figures", {})
+    code = 0
+    print(f"--check against {path.name} (commit {stored.get('commit', '?')}, load "
+          f"{stored.get('load_avg', {}).get('start', ['?'])[0]}; now load {load_avg()[0]:.2f})")
+    for key, way in better.items():
+        if way not in ("lower", "higher"):
+            raise ValueError(f"better[{key!r}]: expected 'lower' or 'higher', got {way!r}")
+        if key not in old or key not in figures:
+            print(f"  {key}: missing ({'stored' if key not in old else 'measured'} figures lack it)")
+            code = max(code, 2)
+            continue
+        new_v, old_v = float(figures[key]), float(old[key])
+        worse = new_v / old_v if way == "lower" else old_v / new_v if new_v > 0 else float("inf")
+        ok = worse <= factor
+        print(f"  {key}: {new_v:.4g} now, {old_v:.4g} stored ({way} is better): {worse:.2f}x "
+              f"{'ok' if ok else f'WORSE than {factor}x'}")
+        if not ok:
+            code = max(code, 1) if code != 2 else 2
+    return code
+
+
+def finish(name: str, figures: Mapping[str, float], tables: Mapping[str, str] | None = None, *,
+           check: bool = False, better: Mapping[str, str] | None = None) -> int:
+    """A benchmark's last step: with ``check``, :func:`check_result` (nothing written); else :func:`write_result`.
+
+    Returns the process exit code.
+    """
+    if check:
+        return check_result(name, figures, better or {})
+    write_result(name, figures, tables)
+    return 0

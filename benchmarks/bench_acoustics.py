@@ -24,6 +24,7 @@ from dataclasses import replace
 import numpy as np
 from tqdm import tqdm
 
+from _results import add_check_option, finish
 from ssl_sim.acoustics import AcousticConfig, AcousticSimulator, RobotPose
 from ssl_sim.acoustics.scene import AcousticScene
 from ssl_sim.world import VictimSite
@@ -99,9 +100,10 @@ def listen_costs(world, diffraction: bool = True) -> dict:
             "diffracted_arrivals_per_source_pose": spent["arrivals"] / max(1, spent["calls"])}
 
 
-def main() -> None:
+def main() -> int:
     ap = argparse.ArgumentParser(description="acoustic simulation cost")
     ap.add_argument("--quick", action="store_true", help="light rubble only, orders 1-2")
+    add_check_option(ap)
     args = ap.parse_args()
     ws = worlds()
     if args.quick:
@@ -133,7 +135,20 @@ def main() -> None:
     results["machine"] = platform.processor() or platform.machine()
     results["quick"] = args.quick
     print(json.dumps({"bench": "acoustics", **results}))
+    figures = {}
+    for name in ws:
+        for o, v in results[name]["ism"]["orders"].items():
+            figures[f"ism_ms_per_source order {o} | {name}"] = v["ms_per_source"]
+        for d in (False, True):
+            lc = results[name]["listen_diffraction" if d else "listen_no_diffraction"]
+            tag = f"{name}, diffraction {'on' if d else 'off'}"
+            figures[f"listen_new_pose_cpu_s | {tag}"] = lc["new_pose_s"]
+            figures[f"listen_same_pose_cpu_s | {tag}"] = lc["same_pose_s"]
+            if d:
+                figures[f"edge_search_ms_per_source_pose | {name}"] = lc["edge_search_ms_per_source_pose"]
+    return finish("acoustics", figures, check=args.check,
+                  better={k: "lower" for k in figures if k.startswith("listen_new_pose_cpu_s")})
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

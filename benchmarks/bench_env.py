@@ -29,6 +29,7 @@ from collections import defaultdict  # noqa: E402
 import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
 
+from _results import add_check_option, finish  # noqa: E402
 from ssl_sim.envs import EnvConfig, SSLRescueEnv  # noqa: E402
 from ssl_sim.envs.fidelity import compare_fidelities, fidelity_summary  # noqa: E402
 
@@ -128,9 +129,10 @@ def vector(steps: int, workers: int = 2) -> dict:
     return {"workers": workers, "vector_steps": steps, "env_steps_per_s": workers * steps / wall}
 
 
-def main() -> None:
+def main() -> int:
     ap = argparse.ArgumentParser(description="SSLRescue-v0 speed and fidelity")
     ap.add_argument("--quick", action="store_true", help="fewer steps and poses")
+    add_check_option(ap)
     args = ap.parse_args()
     n_fast, n_full, n_vec = (40, 15, 20) if args.quick else (200, 60, 100)
     seeds, poses = (range(100, 104), 6) if args.quick else (range(100, 116), 10)
@@ -170,7 +172,15 @@ def main() -> None:
             "fidelity": {k: (round(v, 3) if isinstance(v, float) else v) for k, v in fid.items()},
             "loadavg_1min": os.getloadavg()[0], "cpus": os.cpu_count(), "quick": args.quick}
     print(json.dumps(line))
+    figures = {"fast_steps_per_cpu_s": fast["steps_per_s"], "fast_ms_per_step": fast["ms_per_step"],
+               **{f"fast_{k}_ms_per_step": v for k, v in fast["ms_breakdown"].items()},
+               "full_steps_per_cpu_s": full["steps_per_s"], "full_ms_per_step": full["ms_per_step"],
+               "vector_env_steps_per_wall_s": vec["env_steps_per_s"], "vector_workers": vec["workers"],
+               "drive_pos_diff_median_m": drive["pos_diff_median_m"],
+               **{f"fidelity_{k}": v for k, v in fid.items() if isinstance(v, (int, float))}}
+    return finish("env", figures, check=args.check,
+                  better={"fast_steps_per_cpu_s": "higher", "full_steps_per_cpu_s": "higher"})
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -30,6 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
+from _results import write_result
 from robot import protocol as P
 from robot.hardware.serial_drive import SerialDrive, SerialDriveConfig
 from robot.kinematics import OmniDriveParams, twist_to_wheels
@@ -208,7 +209,7 @@ def range_costs(seconds: float = 0.5) -> dict:
     return out
 
 
-def main() -> None:
+def main() -> int:
     missing = [t for t in ("avr-gcc", "avr-size", "avr-nm", "make") if shutil.which(t) is None]
     if missing or not Path("/usr/include/simavr/sim_avr.h").exists():
         sys.exit(f"bench_firmware: needs gcc-avr, avr-libc, simavr, libsimavr-dev (missing: {missing or 'simavr'})")
@@ -256,7 +257,16 @@ def main() -> None:
                       "latency_cycles": {k: perf[k] for k in ("SET_TWIST", "SET_HEADING", "STOP")},
                       "ik_max_err_counts": perf["ik_max_err_counts"], "ik_max_err_rad_s": perf["ik_max_err_rad_s"],
                       "link_loss_ms": loss, "ranges": ranges}))
+    figures = {**{k: v for k, v in size.items() if isinstance(v, (int, float))},
+               "parser_worst_cycles_per_call": max(r["max_cycles_per_call"] for r in parse.values()),
+               **{f"parser_mean_cycles_per_byte {k}": r["mean_cycles_per_byte"] for k, r in parse.items()},
+               **{f"latency_median_cycles {k}": perf[k]["median"] for k in ("SET_TWIST", "SET_HEADING", "STOP")},
+               "ik_max_err_counts": perf["ik_max_err_counts"],
+               **{f"link_loss_all_zero_ms {k}": r["zero_ms"] for k, r in loss.items()},
+               **{f"range_cpu_pct {k}": r["cpu_pct"] for k, r in ranges.items()}}
+    write_result("firmware", figures)
+    return 0
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -23,6 +23,7 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from signals import room_talker  # noqa: E402
 
+from _results import add_check_option, finish  # noqa: E402
 from ssl_core.geometry import cube8  # noqa: E402
 from ssl_core.grid import direction_from_angles  # noqa: E402
 from ssl_core.health import MicHealth  # noqa: E402
@@ -39,9 +40,10 @@ def cpu_ms_per_s(feed, x: np.ndarray) -> float:
     return 1e3 * (time.process_time() - t) / (x.shape[1] / FS)
 
 
-def main() -> None:
+def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--seconds", type=float, default=10.0)
+    add_check_option(ap)
     a = ap.parse_args()
     x = room_talker(cube8().positions, direction_from_angles(0.5, 0.2), a.seconds, FS, seed=1)
     healthy = cpu_ms_per_s(MicHealth(cube8(), devices=[0] * 4 + [1] * 4).update, x)
@@ -49,9 +51,11 @@ def main() -> None:
     loc = cpu_ms_per_s(Localizer(cube8(), LocalizerConfig()).process, x)
     print(f"CPU ms per s of audio ({a.seconds:g} s, one core): health monitor {healthy:.1f} (healthy array), "
           f"{swapped:.1f} (swapped pair); localizer {loc:.1f}")
-    print(json.dumps({"bench": "health", "seconds": a.seconds, "health_cpu_ms_per_s": round(healthy, 2),
-                      "health_swapped_cpu_ms_per_s": round(swapped, 2), "localizer_cpu_ms_per_s": round(loc, 2)}))
+    figures = {"seconds": a.seconds, "health_cpu_ms_per_s": round(healthy, 2),
+               "health_swapped_cpu_ms_per_s": round(swapped, 2), "localizer_cpu_ms_per_s": round(loc, 2)}
+    return finish("health", figures, check=a.check,
+                  better={"health_cpu_ms_per_s": "lower", "health_swapped_cpu_ms_per_s": "lower"})
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -43,6 +43,8 @@ sys.path[:0] = [str(ROOT / "src"), str(ROOT)]
 
 import numpy as np  # noqa: E402
 
+from _results import add_check_option, finish  # noqa: E402
+
 FS = 16000
 HIT_DEG = 10.0
 
@@ -244,7 +246,7 @@ def cpu_table(seconds: float) -> dict:
     return out
 
 
-def main() -> None:
+def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__, formatter_class=argparse.RawDescriptionHelpFormatter)
     ap.add_argument("--quick", action="store_true", help="1 trial of 2 s per condition, 2 pra windows")
     ap.add_argument("--trials", type=int, default=4)
@@ -252,6 +254,7 @@ def main() -> None:
     ap.add_argument("--pra-windows", type=int, default=4)
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--methods", default=None, help="comma-separated rows to run (default: all); cpu = the CPU part")
+    add_check_option(ap)
     ap.add_argument("--cpu-child", type=float, default=None, help=argparse.SUPPRESS)
     ap.add_argument("--no-pin", action="store_true", help=argparse.SUPPRESS)
     ap.add_argument("--cpu-sources", type=int, default=1, help=argparse.SUPPRESS)
@@ -259,7 +262,7 @@ def main() -> None:
     a = ap.parse_args()
     if a.cpu_child is not None:
         print(json.dumps(cpu_child(a.cpu_child, not a.no_pin, a.cpu_sources, a.cpu_rescan)))
-        return
+        return 0
     if a.quick:
         a.trials, a.seconds, a.pra_windows = 1, 2.0, 2
     tracking = _tracker_class() is not None
@@ -290,8 +293,7 @@ def main() -> None:
         print(f"[{cname} done]", file=sys.stderr, flush=True)
     print(f"{a.trials} trials x {a.seconds:g} s per condition; hit % / false % / median error (deg) "
           f"(whole recording: trials with every talker within {HIT_DEG:g} deg / - / median error)\n")
-    print("| method | " + " | ".join(conds) + " |")
-    print("|---|" + "---|" * len(conds))
+    md = ["| method | " + " | ".join(conds) + " |", "|---|" + "---|" * len(conds)]
     for m in methods:
         cells = []
         for c in conds:
@@ -299,7 +301,8 @@ def main() -> None:
             false = "-" if np.isnan(r["false_pct"]) else f"{r['false_pct']:.0f}"
             err = "-" if np.isnan(r["err_deg"]) else f"{r['err_deg']:.1f}"
             cells.append(f"{r['hit_pct']:.0f} / {false} / {err}")
-        print(f"| {m} | " + " | ".join(cells) + " |")
+        md.append(f"| {m} | " + " | ".join(cells) + " |")
+    print("\n".join(md))
     cpu = cpu_table(a.seconds if a.quick else 20.0) if "cpu" in wanted else {}
     label = "detection + tracking" if tracking else "detection"
     if cpu:
@@ -307,7 +310,16 @@ def main() -> None:
     for name, r in cpu.items():
         print(f"  {name:26s} {r['cpu_ms_per_s']:6.2f} ms/s   locate {r['locate_cpu_ms_per_s']:6.2f} ms/s")
     print(json.dumps({"bench": "hearing", "trials": a.trials, "seconds": a.seconds, "table": table, "cpu": cpu}))
+    figures = {f"cpu_ms_per_audio_s {name}": r["cpu_ms_per_s"] for name, r in cpu.items()}
+    figures.update({f"locate_cpu_ms_per_audio_s {name}": r["locate_cpu_ms_per_s"] for name, r in cpu.items()})
+    for m in methods:
+        for c in conds:
+            figures.update({f"{k} {m} | {c}": v for k, v in table[m][c].items() if isinstance(v, (int, float))})
+    tables = {f"Hearing in noise ({a.trials} trials x {a.seconds:g} s per condition; hit % / false % / median "
+              f"error deg)": "\n".join(md) + "\n"} if methods else {}
+    return finish("hearing", figures, tables, check=a.check,
+                  better={k: "lower" for k in figures if k.startswith("cpu_ms_per_audio_s")})
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

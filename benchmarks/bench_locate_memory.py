@@ -1,4 +1,4 @@
-"""Benchmark: ``ssl-locate`` peak memory on a long 8-channel file (issue 14: <= 300 MB for an hour).
+"""Benchmark: ``ssl-locate`` peak memory on a long 8-channel file (target: <= 300 MB for an hour).
 
 Generates a 16-bit 8-channel 16 kHz WAV of the requested length in a temporary folder, block by
 block (a talker-like noise burst from a fixed direction every 3 s, plus sensor noise), runs
@@ -23,6 +23,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
+from _results import add_check_option, finish  # noqa: E402
 from ssl_core.geometry import cube8  # noqa: E402
 from ssl_core.grid import direction_from_angles  # noqa: E402
 
@@ -50,10 +51,11 @@ def write_long_wav(path: Path, seconds: int, seed: int = 0) -> tuple[float, floa
     return az, el
 
 
-def main() -> None:
+def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--minutes", type=float, default=60.0)
     ap.add_argument("--quick", action="store_true", help="5 minutes instead")
+    add_check_option(ap)
     args = ap.parse_args()
     minutes = 5.0 if args.quick else args.minutes
     with tempfile.TemporaryDirectory() as tmp:
@@ -68,17 +70,20 @@ def main() -> None:
         after = resource.getrusage(resource.RUSAGE_CHILDREN)
         if res.returncode != 0:
             raise SystemExit(f"ssl-locate failed ({res.returncode}): {res.stderr}")
-        det = json.loads(res.stdout)["windows"][0]["detections"][0]
+        det = json.loads(res.stdout.strip().splitlines()[-1])["windows"][0]["detections"][0]
         size_mb = path.stat().st_size / 1e6
     peak_mb = after.ru_maxrss / 1024  # Linux: kB
     cpu = (after.ru_utime + after.ru_stime) - (before.ru_utime + before.ru_stime)
     print(f"{minutes:g} min 8-channel 16-bit WAV ({size_mb:.0f} MB, generated in {gen_s:.0f} s): ssl-locate peak RSS "
           f"{peak_mb:.0f} MB, CPU {cpu:.1f} s ({1000 * cpu / (minutes * 60):.1f} ms per second of audio); "
           f"found az {det['azimuth_deg']:.1f} el {det['elevation_deg']:.1f} (true {az:g}, {el:g})")
-    print(json.dumps({"bench": "locate_memory", "minutes": minutes, "file_mb": round(size_mb, 1),
-                      "peak_rss_mb": round(peak_mb, 1), "cpu_s": round(cpu, 2),
-                      "azimuth_deg": det["azimuth_deg"], "elevation_deg": det["elevation_deg"]}))
+    figures = {"minutes": minutes, "file_mb": round(size_mb, 1), "peak_rss_mb": round(peak_mb, 1),
+               "cpu_s": round(cpu, 2), "cpu_ms_per_audio_s": round(1000 * cpu / (minutes * 60), 2),
+               "azimuth_deg": det["azimuth_deg"], "elevation_deg": det["elevation_deg"], "true_azimuth_deg": az,
+               "true_elevation_deg": el}
+    return finish("locate_memory", figures, check=args.check,
+                  better={"peak_rss_mb": "lower", "cpu_ms_per_audio_s": "lower"})
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

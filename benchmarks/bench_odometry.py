@@ -7,7 +7,7 @@ the true pose; the simulated gyro's bias (it drifts) and the odometry's standsti
 after the other on one core (BLAS threads capped at 1).
 
 Prints a table and one JSON line. Run: ``.venv/bin/python benchmarks/bench_odometry.py [--seeds 0,1,2,3,4,5,6,7]``.
-Target (issue 13): heading error <= 3 deg and position error <= 0.3 m after 200 s on every seed.
+Target: heading error <= 3 deg and position error <= 0.3 m after 200 s on every seed.
 """
 from __future__ import annotations
 
@@ -20,6 +20,7 @@ import argparse  # noqa: E402
 import json  # noqa: E402
 import warnings  # noqa: E402
 
+from _results import write_result  # noqa: E402
 from ssl_sim.runner import odometry_drift  # noqa: E402
 
 
@@ -53,6 +54,15 @@ def main(argv=None) -> int:
     print(json.dumps({"bench": "odometry", "scenario": args.scenario, "duration_s": args.duration, "target_met": met,
                       "runs": [{k: (round(r[k], 4) if isinstance(r[k], float) else r[k]) for k in keys}
                                for r in rows]}))
+    md = ["| seed | heading error (deg) | position error (m) | bumper recoveries |", "|---|---|---|---|"]
+    md += [f"| {r['seed']} | {r['heading_error_deg']:.2f} | {r['position_error_m']:.3f} | {r['bumper_recoveries']} |"
+           for r in rows]
+    write_result("odometry", {"seeds": len(rows), "duration_s": args.duration, "target_met": int(met),
+                              "max_heading_error_deg": max(r["heading_error_deg"] for r in rows),
+                              "max_position_error_m": max(r["position_error_m"] for r in rows),
+                              "mean_position_error_m": sum(r["position_error_m"] for r in rows) / len(rows)},
+                 {f"Odometry end-pose error after {args.duration:g} s in {args.scenario} (gyro + free wheels)":
+                  "\n".join(md) + "\n"})
     return 0
 
 

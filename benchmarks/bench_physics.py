@@ -9,6 +9,7 @@ Prints a table and one JSON line. Run: ``.venv/bin/python benchmarks/bench_physi
 """
 from __future__ import annotations
 
+import argparse
 import json
 import platform
 import time
@@ -16,6 +17,7 @@ import time
 import mujoco
 import numpy as np
 
+from _results import add_check_option, finish
 from robot.kinematics import forward_kinematics, integrate_pose
 from ssl_sim.physics import SimRobot, load_scene
 
@@ -80,7 +82,10 @@ def odometry(ramp: bool) -> dict:
             "yaw_drift_deg": float(np.degrees(abs(np.angle(np.exp(1j * (est[2] - p.yaw))))))}
 
 
-def main() -> None:
+def main() -> int:
+    ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
+    add_check_option(ap)
+    args = ap.parse_args()
     alone = speed(None, 30.0)
     dense = speed(load_scene("dense_collapsed_room"), 60.0)
     track = tracking()
@@ -96,15 +101,16 @@ def main() -> None:
     for name, o in (("ramped 1 m/s^2", odo_ramp), ("step commands", odo_step)):
         print(f"odometry drift over 10 s ({name}): {o['pos_drift_m'] * 1e3:.1f} mm over {o['path_m']:.2f} m, "
               f"yaw {o['yaw_drift_deg']:.2f} deg")
-    print(json.dumps({"bench": "physics", "mujoco": mujoco.__version__,
-                      "speed_x_robot_alone": round(alone["speed_x"], 1),
+    figures = {"speed_x_robot_alone": round(alone["speed_x"], 1),
                       "speed_x_dense_rubble": round(dense["speed_x"], 1),
                       "twist_worst_rel_error": round(track["worst_rel_error"], 4),
                       "odo_drift_ramped_m": round(odo_ramp["pos_drift_m"], 4),
                       "odo_drift_step_m": round(odo_step["pos_drift_m"], 4),
                       "odo_yaw_drift_ramped_deg": round(odo_ramp["yaw_drift_deg"], 2),
-                      "odo_yaw_drift_step_deg": round(odo_step["yaw_drift_deg"], 2)}))
+                      "odo_yaw_drift_step_deg": round(odo_step["yaw_drift_deg"], 2)}
+    return finish("physics", figures, check=args.check,
+                  better={"speed_x_robot_alone": "higher", "speed_x_dense_rubble": "higher"})
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

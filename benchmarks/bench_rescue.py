@@ -8,7 +8,7 @@ removed from a temporary copy). Prints, per scenario and version: victims found,
 SPL, false "found" per run, runs ending "stuck", position error of found victims (median / p90 over victims),
 mean simulated time; then one JSON line.
 
-Targets (issue 13): paper_lab 8/8; light_rubble_three >= 23/24 victims with a 180 s limit, mean SPL >= 0.6;
+Targets: paper_lab 8/8; light_rubble_three >= 23/24 victims with a 180 s limit, mean SPL >= 0.6;
 dense_pump >= 12/16; the machine-louder scenario >= 4/5 seeds; false found <= 0.1 per run; no "stuck" while
 back-offs succeed; position error median <= 0.3 m, p90 <= 0.5 m.
 
@@ -44,6 +44,7 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 from _blas_kernel import check_kernels, default_kernel  # noqa: E402
+from _results import write_result  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ["paper_lab", "light_rubble_three", "dense_pump", "behind_partition", "half_buried_slab"]
@@ -228,6 +229,16 @@ def main(argv: list[str] | None = None) -> int:
         print(f"baseline ({args.baseline_src or args.baseline}):\n" + _markdown(old) + "\n")
     print(json.dumps({"bench": "rescue", "seeds": seeds, "blas": kernels, "new": new, "old": old,
                       "wall_s": round(time.perf_counter() - t0, 1)}))
+    figures = {}
+    for row in new:
+        found, victims = (int(v) for v in row["victims_found"].split("/"))
+        figures.update({f"victims_found | {row['scenario']}": found, f"victims | {row['scenario']}": victims})
+        figures.update({f"{k} | {row['scenario']}": v for k, v in row.items()
+                        if isinstance(v, (int, float)) and not isinstance(v, bool)})
+    seed_txt = f"{seeds[0]}-{seeds[-1]}" if seeds == list(range(seeds[0], seeds[-1] + 1)) else ",".join(map(str, seeds))
+    write_result("rescue", figures, {
+        f"Rescue scenarios, seeds {seed_txt}, OpenBLAS kernels {', '.join(k or 'CPU default' for k in kernels)} "
+        f"(light_rubble_three limited to {TIME_LIMITS['light_rubble_three']:g} s)": _markdown(new) + "\n"})
     return 0
 
 

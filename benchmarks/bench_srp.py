@@ -21,6 +21,7 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 import pyroomacoustics as pra  # noqa: E402
 
+from _results import add_check_option, finish  # noqa: E402
 from ssl_core.geometry import cube8  # noqa: E402
 from ssl_core.grid import direction_from_angles, n_points_for_spacing  # noqa: E402
 from ssl_core.localizer import Localizer, LocalizerConfig  # noqa: E402
@@ -111,12 +112,13 @@ def summary(name, cpu, audio, blocks, errs):
             "median_el_err_deg": float(np.median(e[:, 1])), "estimates": len(errs)}
 
 
-def main() -> None:
+def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__)
     ap.add_argument("--trials", type=int, default=8)
     ap.add_argument("--seconds", type=float, default=3.0)
     ap.add_argument("--pra-blocks", type=int, default=3, help="100 ms blocks per trial for the (slow) pyroomacoustics methods")
     ap.add_argument("--seed", type=int, default=0)
+    add_check_option(ap)
     args = ap.parse_args()
     try:
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})  # one core
@@ -136,9 +138,19 @@ def main() -> None:
               f"{r['median_az_err_deg']:7.2f} {r['median_el_err_deg']:7.2f}")
     speedup = rows[1]["cpu_ms_per_s"] / rows[0]["cpu_ms_per_s"]
     print(f"speed-up over pyroomacoustics SRP at the same grid: {speedup:.0f}x")
-    print(json.dumps({"bench": "srp", "grid_points": n_grid, "resolution_deg": RES_DEG, "results": rows,
-                      "speedup_vs_pra_srp": speedup}))
+    ours, pra_srp, pra_music = rows
+    figures = {"ssl_core_cpu_ms_per_audio_s": ours["cpu_ms_per_s"], "ssl_core_x_realtime": ours["rtf"],
+               "ssl_core_median_az_err_deg": ours["median_az_err_deg"],
+               "ssl_core_median_el_err_deg": ours["median_el_err_deg"],
+               "pra_srp_cpu_ms_per_audio_s": pra_srp["cpu_ms_per_s"], "pra_music_cpu_ms_per_audio_s":
+               pra_music["cpu_ms_per_s"], "speedup_vs_pra_srp": speedup, "grid_points": n_grid}
+    table = "| method | x real time | CPU ms per s of audio | median az / el error (deg) |\n|---|---|---|---|\n" + "".join(
+        f"| {r['method']} | {r['rtf']:.3g} | {r['cpu_ms_per_s']:.3g} | {r['median_az_err_deg']:.2f} / "
+        f"{r['median_el_err_deg']:.2f} |\n" for r in rows)
+    return finish("srp", figures, {f"SRP-PHAT against pyroomacoustics ({args.trials} trials x {args.seconds:g} s, "
+                                   f"{n_grid}-point grid, one core)": table},
+                  check=args.check, better={"ssl_core_cpu_ms_per_audio_s": "lower"})
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

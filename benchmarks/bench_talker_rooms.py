@@ -1,6 +1,6 @@
 """Benchmark: a talker beside a louder real machine in a reverberant room, through the real chain.
 
-The rooms of issue 12 (tests/sound_dataset.py: RT60 0.6 s, 7 x 6 x 3.2 m, talker and machine 2 m from the
+The talker-beside-a-machine rooms (tests/sound_dataset.py: RT60 0.6 s, 7 x 6 x 3.2 m, talker and machine 2 m from the
 cube, 60+ deg apart, recorded speech and machinery): ``--rooms test`` the five scored in
 tests/test_hearing.py (data set test part), ``--rooms dev`` six tuning rooms (dev part's talkers and
 machines, other azimuths, robot position and simulation seed). For each localizer setting:
@@ -34,6 +34,7 @@ sys.path[:0] = [str(ROOT / "src"), str(ROOT / "tests")]
 
 import numpy as np  # noqa: E402
 
+from _results import write_result  # noqa: E402
 from sound_dataset import DEV_ROBOT_XY, DEV_ROOM_CASES, DEV_SEED, FS, ROOM_CASES, room_case  # noqa: E402
 from ssl_core.grid import angular_distance  # noqa: E402
 from ssl_core.localizer import Localizer, LocalizerConfig  # noqa: E402
@@ -182,6 +183,10 @@ def main() -> None:
     print(json.dumps({"bench": "talker_rooms", "rooms": args.rooms, "overrides": over, "hearing": hear_over,
                       **{k: round(float(np.mean(v)), 3) if v else None for k, v in pooled.items() if k != "scanalone"},
                       "scan_detections_machine_alone": len(pooled["scanalone"])}))
+    figures = {f"{k}_share": round(float(np.mean(v)), 3) for k, v in pooled.items() if k != "scanalone" and v}
+    figures["scan_detections_machine_alone"] = len(pooled["scanalone"])
+    suffix = "" if not (over or hear_over or args.quick) else "_variant"
+    write_result(f"talker_rooms_{args.rooms}{suffix}", figures)
 
 
 if __name__ == "__main__":

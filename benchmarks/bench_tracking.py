@@ -17,6 +17,7 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
+from _results import add_check_option, finish  # noqa: E402
 from ssl_core.grid import direction_from_angles  # noqa: E402
 from ssl_core.localizer import Detection  # noqa: E402
 from ssl_core.tracking import Tracker  # noqa: E402
@@ -45,9 +46,10 @@ def scenario(seconds: float, seed: int = 0) -> list[list[Detection]]:
     return windows
 
 
-def main() -> None:
+def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--seconds", type=float, default=120.0, help="audio seconds simulated (default 120)")
+    add_check_option(ap)
     args = ap.parse_args()
     windows = scenario(args.seconds)
     tracker = Tracker()
@@ -61,10 +63,11 @@ def main() -> None:
     print(f"tracker: {len(windows)} windows ({audio:.0f} s of audio), mean {np.mean(n_tracks):.2f} confirmed tracks, "
           f"{sum(len(d) for d in windows)} detections")
     print(f"CPU {ms_per_s:.2f} ms per second of audio, {1e6 * cpu / len(windows):.0f} us per window")
-    print(json.dumps({"bench": "tracking", "audio_s": round(audio, 1), "windows": len(windows),
-                      "cpu_ms_per_audio_s": round(ms_per_s, 3), "cpu_us_per_window": round(1e6 * cpu / len(windows), 1),
-                      "mean_confirmed_tracks": round(float(np.mean(n_tracks)), 2)}))
+    figures = {"audio_s": round(audio, 1), "windows": len(windows), "cpu_ms_per_audio_s": round(ms_per_s, 3),
+               "cpu_us_per_window": round(1e6 * cpu / len(windows), 1),
+               "mean_confirmed_tracks": round(float(np.mean(n_tracks)), 2)}
+    return finish("tracking", figures, check=args.check, better={"cpu_ms_per_audio_s": "lower"})
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -3,7 +3,7 @@
 Per category: the share of labelled 1 s chunks (hop 0.5 s) called speech (recall for speech,
 false-alarm rate for the rest), then precision/recall over all categories; for Silero VAD
 (onnxruntime, the chosen one), WebRTC VAD (webrtcvad-wheels, modes 2 and 3) and the old
-hand-made score ``benchmarks/old_voice_score.py's voice_likeness``. A chunk is called speech when its statistic (the
+hand-made score ``benchmarks/_voice_likeness_baseline.py's voice_likeness``. A chunk is called speech when its statistic (the
 fraction of speech frames for a frame-wise VAD, the score for the old one) reaches a threshold
 chosen per detector on the DEV part (best recall minus false-alarm rate), so each gets its fairest rule.
 Then the CPU cost per second of audio (one core, process time, min and median of 5 runs) of Silero
@@ -29,7 +29,8 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 import numpy as np  # noqa: E402
 
 from robot.vad import SileroVad, speech_fraction  # noqa: E402
-from old_voice_score import voice_likeness  # noqa: E402  (the hand-made score the VAD replaced)
+from _results import finish  # noqa: E402
+from _voice_likeness_baseline import voice_likeness  # noqa: E402  (the hand-made score the VAD replaced)
 from sound_dataset import FS, chunk_starts, recordings  # noqa: E402
 
 THRESHOLDS = np.round(np.arange(0.05, 1.0, 0.05), 2)
@@ -231,23 +232,35 @@ def room_frontends(seconds: int = 16) -> dict:
     return {k: np.mean(v, axis=0).tolist() for k, v in rows.items()}
 
 
-def main() -> None:
+def _cost_figures(c: dict) -> dict[str, float]:
+    """The minimum of the runs per cost line (the least disturbed by other processes)."""
+    out = {}
+    for k, v in c.items():
+        for name, (lo, _med) in (v.items() if isinstance(v, dict) else [("", v)]):
+            out[f"cost_ms_per_audio_s {k}{' ' + name if name else ''}"] = lo
+    return out
+
+
+def main() -> int:
+    unknown = [a for a in sys.argv[1:] if a not in ("--cost-only", "--check")]
+    if unknown:
+        raise SystemExit(f"bench_voice: unknown argument(s) {unknown}; expected [--cost-only] [--check]")
+    check = "--check" in sys.argv[1:]
     if "--cost-only" in sys.argv[1:]:
         c = cost()
         _print_cost(c)
-        print(json.dumps({"bench": "voice", "machine": platform.machine(), "cost_ms_per_s_min_median": c}))
-        return
+        figures = _cost_figures(c)
+        return finish("voice_cost", figures, check=check, better={k: "lower" for k in figures})
     th = tune(evaluate("dev"))
     table = {m: {c: [int(v >= th[m]) for v in vals] for c, vals in t.items()} for m, t in evaluate("test").items()}
     cats = sorted({c for t in table.values() for c in t}, key=lambda c: (c not in ("speech", "shouts"), c))
     names = list(table)
     print("test part, 1 s chunks called speech (%); chunk thresholds tuned on dev: "
           + ", ".join(f"{m} {th[m]:.2f}" for m in names))
-    print("| category | n | " + " | ".join(names) + " |")
-    print("|---|---|" + "---|" * len(names))
+    md = ["| category | n | " + " | ".join(names) + " |", "|---|---|" + "---|" * len(names)]
     for c in cats:
         n = len(table[names[0]][c])
-        print(f"| {c} | {n} | " + " | ".join(f"{100 * np.mean(table[m][c]):.0f}" for m in names) + " |")
+        md.append(f"| {c} | {n} | " + " | ".join(f"{100 * np.mean(table[m][c]):.0f}" for m in names) + " |")
     summary = {}
     for m in names:
         tp = sum(table[m]["speech"])
@@ -256,19 +269,29 @@ def main() -> None:
         n_neg = sum(len(v) for c, v in table[m].items() if c not in ("speech", "shouts"))
         summary[m] = {"speech_recall": tp / (tp + fn), "precision": tp / max(tp + fp, 1), "false_alarm_rate": fp / n_neg,
                       "shouts_called_speech": float(np.mean(table[m]["shouts"]))}
-    print("| overall (speech vs non-speech; shouts apart) | | " + " | ".join(
+    md.append("| overall (speech vs non-speech; shouts apart) | | " + " | ".join(
         f"R {summary[m]['speech_recall']:.2f} P {summary[m]['precision']:.2f} FA {summary[m]['false_alarm_rate']:.3f}"
         for m in names) + " |")
+    print("\n".join(md))
     room = room_frontends()
     print("room RT60 0.6 s, machine 6 dB louder, 5 cases (ssl_sim/sounds ROOM_CASES), seconds after the first 2:")
-    print("| front end | her talking seconds heard as speech | seconds speech heard toward the machine |")
-    print("|---|---|---|")
+    md_room = ["| front end | her talking seconds heard as speech | seconds speech heard toward the machine |",
+               "|---|---|---|"]
     for k, (her, mach) in room.items():
-        print(f"| {k} | {100 * her:.0f} % | {100 * mach:.0f} % |")
+        md_room.append(f"| {k} | {100 * her:.0f} % | {100 * mach:.0f} % |")
+    print("\n".join(md_room))
     c = cost()
     _print_cost(c)
-    print(json.dumps({"bench": "voice", "machine": platform.machine(), "thresholds": th, "summary": summary, "room": room,
-                      "cost_ms_per_s_min_median": c}))
+    figures = _cost_figures(c)
+    for m in names:
+        figures.update({f"{k} {m}": v for k, v in summary[m].items()})
+        figures.update({f"speech_pct {m} | {cat}": 100 * float(np.mean(table[m][cat])) for cat in cats})
+    for k, (her, mach) in room.items():
+        figures[f"her_speech_pct {k}"], figures[f"machine_speech_pct {k}"] = 100 * her, 100 * mach
+    tables = {"Voice activity on the sound set's test part (% of 1 s chunks called speech)": "\n".join(md) + "\n",
+              "A talker beside a machine 6 dB louder (RT60 0.6 s, 5 rooms): which front end lets the VAD hear her":
+              "\n".join(md_room) + "\n"}
+    return finish("voice", figures, tables, check=check, better={k: "lower" for k in _cost_figures(c)})
 
 
 def _print_cost(c: dict) -> None:
@@ -279,4 +302,4 @@ def _print_cost(c: dict) -> None:
 
 
 if __name__ == "__main__":
-    main()
+    raise SystemExit(main())

@@ -1,5 +1,5 @@
 """Bad input to ``ssl-rescue`` and ``ssl-robot`` gives one line naming the field or option, exit code 2, and
-before anything runs (issue 14, items 8 and 9)."""
+before anything runs."""
 from __future__ import annotations
 
 import io

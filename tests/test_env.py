@@ -317,7 +317,7 @@ def test_detection_voice_hears_speech_toward_a_talker_and_none_toward_a_machine(
     """``detection_voice``: a real recorded talker (data set's test part) and a real machine as plane waves
     from known directions 90 deg apart, machine 6 dB louder; the beam toward her is heard as speech in
     most 32 ms frames of a 1 s window, the beam toward the machine in none (Silero: 0 % of non-speech
-    chunks, README)."""
+    chunks, docs/design/voice.md)."""
     sys.path.insert(0, os.path.dirname(__file__))
     from signals import plane_wave
     from sound_dataset import FS, recordings

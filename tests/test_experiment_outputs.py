@@ -1,5 +1,5 @@
 """``experiments.run_all --quick`` never overwrites the committed full results, and the report's
-"generated at commit" line tells the truth about the source tree (issue 14, item 11)."""
+"generated at commit" line tells the truth about the source tree."""
 from __future__ import annotations
 
 import subprocess

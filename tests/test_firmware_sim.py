@@ -305,7 +305,7 @@ def _wait_zero(board, n: int, timeout: float = 20.0) -> list[PwmEvent]:
 
 
 def test_link_loss_stops_full_duty_within_300ms(board, built):
-    """Issue 14: from full duty, all three PWM duties reach 0 within 300 ms of the last valid command."""
+    """from full duty, all three PWM duties reach 0 within 300 ms of the last valid command."""
     with SerialDrive(board.port, steady(keepalive=None)) as d:
         n = board.settle()
         d.set_twist(0.0, 0.0, -8.0)                    # every wheel at -20 rad/s: full duty
@@ -328,7 +328,7 @@ def test_link_loss_stops_full_duty_within_300ms(board, built):
 
 
 def test_hung_control_loop_stops_the_robot(board, built):
-    """Issue 14: with the keepalive running, a control loop that stops refreshing its command stops the
+    """with the keepalive running, a control loop that stops refreshing its command stops the
     motors within command_deadline + 300 ms (the keepalive never drives on for a hung application)."""
     deadline_s = 0.6
     with SerialDrive(board.port, steady(keepalive=0.1, command_deadline=deadline_s)) as d:
@@ -428,7 +428,7 @@ def test_firmware_parser_agrees_with_python_reference_on_random_streams(board, b
     frames = ref.feed(bytes(stream))
     assert ref.pending == 0
     assert ref.timeouts == 0
-    # Deterministic under CPU load (issue 14 item 10; it used to fail about once per loaded run):
+    # Deterministic under CPU load (it must not depend on scheduling):
     # - the stream goes in through the harness (RX command), which puts it on the simulated line
     #   back-to-back in *simulated* time. Written to the pty, bytes reached the simulation at
     #   wall-clock moments, so a host stall of > 5 ms mid-stream was an MCU inter-byte timeout;
@@ -528,7 +528,7 @@ def test_stalled_wheel_is_reported(built):
         b.close()
 
 
-# --------------------------------------------------------------------------- sensors (issue 13)
+# --------------------------------------------------------------------------- sensors
 def _counts(rad_s: float) -> int:
     return round(rad_s * P.GYRO_COUNTS_PER_RAD_S)
 

@@ -269,7 +269,7 @@ def _chain_scores(sir_db):
     return rows
 
 
-# Measured (docs/hearing.md), per room in the order of ROOM_CASES. Without the
+# Measured (docs/design/hearing.md), per room in the order of ROOM_CASES. Without the
 # interference rescan the talker got no track in most rooms: the SRP-PHAT map of the mixture had a peak
 # within 10 deg of her in 2-56 of 124 windows at -6 dB SIR even with four peaks and no gate; pooled, her
 # track VOICE 33 %, machine NON_VOICE 81 %. With the rescan (bins weighted by their departure from the
@@ -277,7 +277,7 @@ def _chain_scores(sir_db):
 # 61 %, the machine's NON_VOICE 77 %; with the hearing's crediting rules 61 / 93 %; with the voice scan
 # (MPDR beams every 15 deg on the horizon, VAD on each, the beam with the most VAD probability x denoised
 # power becomes a detection) 76 % (79/100/79/100/21) / 93 % (100/64/100/100/100). Then (chosen on
-# DEV_ROOM_CASES, docs/hearing.md "The voice scan's map"): speech heard in several beams goes to the
+# DEV_ROOM_CASES, docs/design/hearing.md "The voice scan's map"): speech heard in several beams goes to the
 # track whose azimuth carries the most of the scan's speech (not the largest excess over the noise floor,
 # which let the machine's beam and a ghost own her speech), and the scan detects after 0.5 s of listening
 # instead of 2 s: her track VOICE 100/93/100/100/71 % (pooled 93 %, 65 of her 70 windows, 63 needed), the
@@ -297,7 +297,7 @@ def test_real_chain_talker_is_voice_and_louder_machine_is_not_in_a_reverberant_r
 # Measured: a VOICE track within 10 deg of her in 93/79/100/100/93 % of her windows per room, pooled 93 %
 # with the voice scan's owner rule and 0.5 s settle (86/86/100/100/79, 90 %, before them; 77 % before the
 # scan: 79/64/93/93/57; 43 % without the interference rescan, 63 % with it before the onset weight, 73 %
-# before the hearing's crediting rules; docs/hearing.md). Seeded simulation, deterministic: 65 of her 70
+# before the hearing's crediting rules; docs/design/hearing.md). Seeded simulation, deterministic: 65 of her 70
 # windows (63 before the owner rule, 54 before the scan), the threshold is 49.
 @pytest.mark.slow
 def test_real_chain_voice_track_within_10_deg_at_0_db_sir():
@@ -313,7 +313,7 @@ def test_one_listen_hears_the_talker_beside_a_louder_machine_and_gives_the_machi
     """The five real-recording rooms above (machine 6 dB louder, 2 m, RT60 0.6 s), cut into 1 s listens as the
     rescue behaviour makes them, beams at the true directions: the listener's chain (``speech_fractions``: MPDR,
     noise suppression, gain, speech owned by one beam) hears her where the plain delay-and-sum beam does not,
-    and gives the machine's beam no speech (README, "Voice evidence per listen")."""
+    and gives the machine's beam no speech (docs/design/behaviour.md, "The sound map")."""
     from robot.hearing import speech_fractions
     from robot.vad import SileroVad, speech_fraction
     from ssl_core.beamform import beam_signal

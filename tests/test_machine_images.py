@@ -14,7 +14,7 @@ from ssl_sim.runner import RescueRun
 from ssl_sim.scenario import load_scenario
 
 # Standing points on the free floor around the pump (world m), 0.4-1.9 m from it, where the shipped behaviour
-# chased its reflections (issue 13).
+# chased its reflections.
 POINTS = ((5.75, 1.75), (6.25, 2.75), (5.75, 3.25), (6.25, 3.75), (4.75, 2.75))
 
 

@@ -400,7 +400,7 @@ def test_loop_url_echo_is_not_a_reply():
 
 
 def test_nak_for_another_message_with_the_same_seq_is_not_ours(fake):
-    """Issue 14: replies are matched on type and seq; a NAK naming another command is skipped."""
+    """replies are matched on type and seq; a NAK naming another command is skipped."""
     with SerialDrive(fake.path, STEADY) as drive:
         fake.foreign_nak_first = True
         for _ in range(5):
@@ -414,7 +414,7 @@ def test_nak_for_another_message_with_the_same_seq_is_not_ours(fake):
 
 
 def test_keepalive_stops_at_the_command_deadline(fake):
-    """Issue 14: the keepalive repeats a command only while the application refreshes it."""
+    """the keepalive repeats a command only while the application refreshes it."""
     cfg = SerialDriveConfig(reply_timeout=0.05, keepalive=0.05, command_deadline=0.3, connect_timeout=1.0)
     with SerialDrive(fake.path, cfg) as drive:
         for _ in range(8):                             # a live control loop: 0.4 s, longer than the deadline

@@ -85,10 +85,9 @@ def test_path_length_matches_the_physics_trajectory():
 
 
 def test_three_callers_in_light_rubble_found_over_four_seeds():
-    """Seeds 0-3 of the shipped scenario (240 s): at least 11 of the 12 callers found (the issue's 23 of 24, with
+    """Seeds 0-3 of the shipped scenario (240 s): at least 11 of the 12 callers found (the target of 23 of 24, with
     one miss of margin), none declared falsely. Over seeds, not one run: a run is chaotic (one different listen
-    changes the path). Measured: 12 of 12 (README, rescue benchmark, sessions 4 and 5: 47 of 48 on seeds 0-15 in 180 s;
-    8 of 12 was the bound while seed 0 ended wedged on debris)."""
+    changes the path). Measured: 12 of 12 (and 47 of 48 over 16 runs of 180 s: docs/results.md, rescue)."""
     found, false = 0, 0
     for seed in range(4):
         r = run_scenario("light_rubble_three", seed=seed)

@@ -130,7 +130,7 @@ def test_procedural_calls_of_every_speaker_pass_and_machines_and_knocks_do_not(v
         calls += _called_speech(vad, x, _sounding_chunks(x))
     assert len(calls) >= 50 and np.mean(calls) >= 0.95, np.mean(calls)
     # (procedural shouts are not asserted: measured 73 % of male and far fewer of female/child shout
-    # chunks are speech to Silero, which hears real recorded cries as non-speech too: README)
+    # chunks are speech to Silero, which hears real recorded cries as non-speech too: docs/design/voice.md)
     for name, sig in (("pump", pump_noise(FS, 1)), ("generator", generator_noise(FS, 2)),
                       ("knocks", victim_voice("knocks", "male", seed=3))):
         x = sig.render(0, 20 * FS)

@@ -6,7 +6,7 @@ listening spot; a caller at a cell stays unheard after the looks so far with pro
 prod(1 - p_detect). Exploration then goes where a listen would detect most of what is still unheard
 (``gain``), not where the robot has not *driven*: the robot hears 1.5 m around it but covers a 0.3 m swath.
 
-Detection model, measured in dense_pump (``benchmarks/bench_audibility.py``: the robot placed on a 0.5 m grid
+Detection model, measured in dense_pump (``tools/audibility_map.py``: the robot placed on a 0.5 m grid
 of the reachable floor, six standing 1 s listens per point, a caller detected within 15 deg in a listen where
 she sounds): the mid-room caller within 1.5 m was detected in 27 of 54 listens with the pump more than 2.5 m
 away, in 2 of 16 with it closer, and from farther than 1.5 m in 12 of 210 (counted as none here).

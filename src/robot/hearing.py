@@ -15,7 +15,7 @@ every block). Per stage (4.8 ms in a run): Silero 1.6 (its encoder 0.9, the LSTM
 building its inputs 0.2: ``robot.vad``'s split net), MPDR 0.9, STFT 0.45, synthesis 0.3, noise floor and
 gains 0.25, the rest (power, levels, gain, filter, evidence) 1.2. Listening less (1 s in 2, 0.5 in 1.5,
 0.4 in 1) or refreshing the MPDR less often lost windows in the room cases of tests/test_hearing.py
-(docs/hearing.md, "Cost").
+(docs/design/hearing.md, "Cost").
 
 Why this front end (``benchmarks/bench_voice.py``, five rooms of RT60 0.6 s with a talker and a real
 machine recording 6 dB louder, both 2 m away): Silero hears her in 26 % of her talking seconds at one
@@ -30,7 +30,7 @@ beam carries the most speech (mean VAD probability x denoised beam power, averag
 of listening) is a ``Detection`` for the tracker (``voice_detections``) whenever a scan beam hears speech,
 from ``scan_settle_s`` (0.5 s) of listening on. A talker beside a machine 6 dB louder is rarely a peak of the
 SRP-PHAT map, but her voice is heard in the MPDR beams that cancel the machine, most strongly in hers
-(docs/hearing.md, "The voice scan" and "The voice scan's map": in the test rooms her track then exists in 94 %
+(docs/design/hearing.md, "The voice scan" and "The voice scan's map": in the test rooms her track then exists in 94 %
 of her talking seconds instead of 66 %). The same score is the owner rule's map when the scan is on (below).
 Cost: +0.39 ms CPU per second of audio per scan beam (24 beams at 15 deg: +9.4 ms).
 
@@ -42,7 +42,7 @@ The filter (log-odds L of "this source is a human voice", prior L = 0, i.e. P = 
     of its power above its noise floor (the talker's own; a talker leaking into a machine's beam) or,
     with the voice scan on, for the track whose azimuth has the largest scan score (the excess does not
     tell her beam from a leak: in the test rooms the machine's beam and a ghost's owned her speech by it,
-    while the scan's score peaked at her; docs/hearing.md, "The voice scan's map"), and
+    while the scan's score peaked at her; docs/design/hearing.md, "The voice scan's map"), and
     of that beam's speech frames only those at VAD probability >= ``credit_probability`` (0.75) raise
     L: speech leaking into a machine's beam is marginal (on the dev rooms 37-48 % of such frames reach
     0.75, 87-89 % of a talker's own), and where her track is missing her beam cannot compete for it;
@@ -80,7 +80,7 @@ from ssl_core.grid import direction_from_angles
 from ssl_core.noise import NoiseFloor
 from ssl_core.tracking import Track
 
-VAD_RATE = 8000  # Hz: the beams are formed below 4 kHz and heard by Silero at 8 kHz (docs/hearing.md, "Cost")
+VAD_RATE = 8000  # Hz: the beams are formed below 4 kHz and heard by Silero at 8 kHz (docs/design/hearing.md, "Cost")
 
 
 @dataclass(frozen=True)
@@ -107,26 +107,26 @@ class HearingConfig:
     noise_min_gain: float = 0.3    # noise suppression's lowest bin gain (-10 dB; 0.1 measured worse: musical
                                    # noise made Silero hear speech in a machine's beam)
     vad_on_s: float = 0.5          # the chain listens vad_on_s in every vad_period_s (all tracks at once):
-    vad_period_s: float = 1.0      # half the cost. Room cases (docs/hearing.md, "Cost"): 0.5 s in 1 s as good as
+    vad_period_s: float = 1.0      # half the cost. Room cases (docs/design/hearing.md, "Cost"): 0.5 s in 1 s as good as
                                    # continuous; 1 s in 2 s, 0.4 in 1, 0.5 in 1.5 or 0.5 in 2 fall short
     credit_probability: float = 0.75  # only speech frames at this VAD probability or more raise P(voice): a
                                       # talker leaking into a machine's beam is marginal speech (dev rooms,
-                                      # docs/hearing.md, "Crediting speech to its own beam": 37-48 % of the speech
+                                      # docs/design/hearing.md, "Crediting speech to its own beam": 37-48 % of the speech
                                       # frames in machines' beams reach 0.75, 87-89 % of hers; 0.7 / 0.8
                                       # / 0.85 / 0.9 measured there)
     settle_s: float = 1.0          # listening time (s) after the start before speech raises any P(voice): the
                                    # MPDR covariance and noise floors are still filling, and the dev rooms'
                                    # machines' beams owned her speech then (0.5 / 1 / 1.5 / 2 s measured:
-                                   # docs/hearing.md, "Crediting speech to its own beam")
+                                   # docs/design/hearing.md, "Crediting speech to its own beam")
     inherit_deg: float = 20.0   # a new track id within this of a known track starts from its log-odds, not
                                 # the prior: the tracker starts duplicates of one machine at other elevations
                                 # (0: off)
     beam_update_s: float = 0.5     # MPDR inverse covariance (and weights) refreshed every 0.5 s of listening
-                                   # (1 s lost windows in the room cases; docs/hearing.md, "Cost")
+                                   # (1 s lost windows in the room cases; docs/design/hearing.md, "Cost")
     # Voice scan (0: off): beams every scan_step_deg of azimuth on the horizon, each heard by the VAD like a
     # track's; the direction whose beam carries the most speech (VAD probability x denoised beam power,
     # averaged over scan_memory_s of listening) becomes a detection for the tracker (``voice_detections``).
-    # It finds a talker the SRP-PHAT map misses beside a louder machine (docs/hearing.md, "The voice scan"). 15 deg:
+    # It finds a talker the SRP-PHAT map misses beside a louder machine (docs/design/hearing.md, "The voice scan"). 15 deg:
     # the dev rooms' figures equal 10 deg's (and the test rooms'), at 2/3 of the cost; 20 deg lost machine
     # windows. Off by default: +9.4 ms CPU per second of audio (benchmarks/bench_voice.py).
     scan_step_deg: float = 0.0
@@ -136,7 +136,7 @@ class HearingConfig:
                                    # refresh (beam_update_s) its inverse is the first block's 6 frames and the
                                    # scan's peak is off (free field, tests/test_hearing.py: 10 deg at 0.2 s). With
                                    # the scan's owner rule, dev rooms, her track VOICE at 0 / 0.25 / 0.5 / 1 / 1.5
-                                   # / 2 s: 96 / 96 / 94 / 91 / 91 / 91 % (docs/hearing.md, "The voice scan's map")
+                                   # / 2 s: 96 / 96 / 94 / 91 / 91 / 91 % (docs/design/hearing.md, "The voice scan's map")
     scan_min_probability: float = 0.75  # a detection needs a frame at this VAD probability in its beam in the
                                         # block (dev rooms, 0.5 / 0.75 / 0.9: her track VOICE 88 / 90 / 90 %,
                                         # scan detections with the machine alone 11 / 2 / 0 in 112 s; measured
@@ -431,7 +431,7 @@ def voice_scan(samples: np.ndarray, mic_positions: np.ndarray, vad: SileroVad | 
     speech, or None when no scan beam heard speech. The voice scan of ``Hearing`` (``scan_step_deg``: MPDR
     beams every ``step_deg``, each heard by Silero; score = VAD probability x denoised beam power over the
     listen) on a fresh state, fed ``block_s`` at a time; its last detection of the listen is the answer. It
-    finds a talker that is no peak of the SRP-PHAT map beside a louder machine (docs/hearing.md, "The voice
+    finds a talker that is no peak of the SRP-PHAT map beside a louder machine (docs/design/hearing.md, "The voice
     scan"). ``samples``: (n_mics, n) int16 or float full scale 1 at 16 kHz."""
     hearing = Hearing(mic_positions, sample_rate, HearingConfig(vad_on_s=1.0, vad_period_s=1.0, beam_update_s=block_s,
                                                                 scan_step_deg=step_deg), vad=vad)

@@ -13,7 +13,7 @@ else ``NON_VOICE_P``. Asymmetric, as in ``robot.hearing``: speech frames are rar
 calls no 1 s chunk of the data set's non-speech test part speech; the pump of dense_pump gave 0 speech frames
 in 29 of 29 listens), while a listen without speech is weak evidence (a caller pauses; and with the
 delay-and-sum beam used before, callers 2-4 m away in the light rubble gave speech frames in 0-12 % of their
-listens, with this chain a talking caller's beam in 84 %: README, "Voice evidence per listen").
+listens, with this chain a talking caller's beam in 84 %: docs/design/behaviour.md, "The sound map").
 """
 from __future__ import annotations
 

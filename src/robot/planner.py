@@ -5,7 +5,7 @@ Frames: world/odometry frame (x, y in m). Inputs are the ``SoundMap``'s sources 
 
 * **target** (``choose_target``): unfound sources classified victim; while none is, unknown sources (not yet
   classified: a caller who has not called long enough) heard in ``min_unknown_listens`` listens; interferers
-  only when nothing else is mapped (issue 12: never approach a non-voice source while a voice source exists),
+  only when nothing else is mapped (never approach a non-voice source while a voice source exists),
   to check them from close up, where the behaviour rejects them for good if still no voice is heard.
   Utility = P(victim) x exp(-age / ``recency_s``) / (1 + path length / ``distance_scale_m``)
   / (1 + 1-sigma / ``sigma_scale_m``) (a single bearing's guess counts less than a triangulated source), the current
@@ -86,10 +86,9 @@ class PlannerConfig:
     probe_angle_deg: float = 30.0      # ... that far off the bearing (a baseline for triangulation)
     min_listens: int = 2               # an interferer is checked once heard this often (not a stray reflection)
     # An unclassified source (no voice heard) is a target once heard in this many listens: one listen's peak beside
-    # a machine is mostly its reflection. Measured, dense_pump seeds 0-7: 66 chases of voiceless sources whose rays
-    # pointed at no source took 695 s of the 8 runs' 2400 s, most begun on one ray; at 2 instead of 1, seeds 0-31
-    # found 25 instead of 19 of 64 victims (9 runs better, 3 worse), the other scenarios within a run's noise
-    # (docs/rescue_benchmark.md, "Session 9"). Below it, the behaviour listens again or explores: a caller who
+    # a machine is mostly its reflection. Measured in dense_pump: chases of voiceless sources whose rays pointed at
+    # no source took 29 % of the runs' time, most begun on one ray (docs/design/behaviour.md, "Machine images are
+    # not targets"). Below it, the behaviour listens again or explores: a caller who
     # only moans or knocks is heard twice as it passes.
     min_unknown_listens: int = 2
     stop_radius_m: float = 0.35        # plan to within this of a source's estimate

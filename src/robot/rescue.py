@@ -127,11 +127,9 @@ class RescueConfig:
     #                                        reverberant beams of callers 2-4 m away have fewer)
     voice_scan_deg: float = 0.0            # > 0: a listen whose strongest detection is no voice is also scanned for
     #                                        one, beams this far apart in azimuth (robot.listening.Listener: hears a
-    #                                        caller beside a louder machine in 31 of 70 listens instead of 15). Off: at
-    #                                        15 deg, seeds 0-7, light rubble and generator_louder were unchanged,
-    #                                        dense_pump 4 of 16 as without, half_buried_slab 11 vs 12 of 16 (3 false
-    #                                        founds vs 2), behind_partition SPL 0.548 vs 0.593; light rubble seeds 16-31
-    #                                        47 vs 46 of 48, SPL 0.601 vs 0.582 (docs/rescue_benchmark.md, "Session 8")
+    #                                        caller beside a louder machine in 31 of 70 listens instead of 15). Off:
+    #                                        in closed loop its gains and losses over the shipped scenarios stayed
+    #                                        within the runs' chance, and each scan costs 24 beams of VAD
     require_voice: bool = False            # approach only sources classified victim (not unclassified ones)
     # geometry (shared with the sound map: one source of truth for the array height)
     array_height_m: float = 0.30           # array centre above the floor
@@ -180,16 +178,11 @@ class RescueConfig:
     #                                        Measured (84 stored runs, all scenarios): callers' true bearings
     #                                        within 0.5 m had power 0.10 (5th pct) / 0.24 (median), wrong ones
     #                                        0.07 (median); no true find of ~150 below 0.083; the false found
-    #                                        3.9 m behind the partition 0.061 (behind_partition seed 4).
-    #                                        Seeds 0-15 against 0: that false found gone (the caller then not
-    #                                        reached in time), light rubble, half_buried, generator unchanged
+    #                                        3.9 m behind the partition, heard through the gap, 0.061
     bump_found_range_m: float = 0.7        # criterion 4: bump while driving at a target estimated this close: inside
-    #                                        the 0.75 m success radius (0.8 m declared the caller behind
-    #                                        half_buried_slab's slab from 0.82 m, estimated 0.79 m ahead: the only
-    #                                        criterion-4 find in 80 runs, five scenarios, seeds 0-15, session 11), yet
-    #                                        above 0.65 m (0.6 lost a caller behind a block bumped 0.65 m from her,
-    #                                        session 6). No run of seeds 0-15 (six scenarios, Haswell) changed
-    #                                        against 0.8
+    #                                        the 0.75 m success radius (at 0.8 m an estimate 0.79 m ahead declared
+    #                                        a caller behind a slab from 0.82 m), yet above 0.65 m (a caller behind
+    #                                        a block, bumped with her 0.65 m away, is a true find)
     bump_ahead_deg: float = 35.0           # ... and this close to the direction of motion
     bump_heard_within_s: float = 10.0      # ... and heard this recently (2-3 listen cycles: a caller is heard in most;
     #                                        a mirror image beyond a wall, unheard for 25 s, was "found" by bumping
@@ -605,7 +598,7 @@ class RescueBehaviour:
                     s, f"at source #{s.id} ({crit}), no voice yet (P(victim) {s.victim_probability:.2f})"):
                 return True
             # Never heard with speech from close up (where the beam hears a talking caller in most listens:
-            # README, "Voice evidence per listen"): only a mouth below the array (a steep bearing, criteria 1-2)
+            # docs/design/behaviour.md, "The sound map"): only a mouth below the array (a steep bearing, criteria 1-2)
             # makes it a victim (a buried caller the VAD misses, one who knocks); a tight triangulation near
             # rubble alone does not (measured, half_buried_slab seed 1: a voiceless reflection declared by its
             # map estimate, 1.3 m from a victim).

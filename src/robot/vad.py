@@ -1,7 +1,7 @@
 """Voice activity detection: Silero VAD v6 (a small CNN + LSTM speech detector) run by onnxruntime.
 
-Chosen by measurement on ``ssl_sim/sounds`` (``benchmarks/bench_voice.py``, README "Telling a victim
-from a machine") over WebRTC's VAD and the old hand-made ``benchmarks/old_voice_score.py's voice_likeness`` score.
+Chosen by measurement on ``ssl_sim/sounds`` (``benchmarks/bench_voice.py``, docs/design/voice.md "Telling a victim
+from a machine") over WebRTC's VAD and the old hand-made ``benchmarks/_voice_likeness_baseline.py's voice_likeness`` score.
 The model file ``ssl_sim/models/silero_vad_op18_ifless.onnx`` (stored gzip-compressed, ``.onnx.gz``: 1.9 MB instead of
 2.8 MB in the repository) is copied unchanged from the ``silero-vad``
 6.2.3 wheel (MIT, ``ssl_sim/models/silero_vad.LICENSE``; sha256 7671cd04...bd28): that package itself

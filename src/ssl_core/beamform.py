@@ -162,7 +162,7 @@ class MpdrBeamformer:
     ``memory_s``) plus diagonal loading ``loading`` x its mean diagonal: unit gain toward the track,
     least power from everything else. Measured on the 15 cm cube in a room of RT60 0.6 s (talker and a
     machine 2 m away, 60-110 degrees apart): Silero VAD finds speech in the talker's beam in more 1 s
-    windows than with delay-and-sum and less of her in the machine's beam (README, "Telling a victim
+    windows than with delay-and-sum and less of her in the machine's beam (docs/design/voice.md, "Telling a victim
     from a machine"); loading 0.1 of the tried 0.001 / 0.01 / 0.1 held the talker best.
 
     ``max_freq_hz``: beam only the bins below it (``process`` returns those bins); the covariance,

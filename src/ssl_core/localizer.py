@@ -44,14 +44,14 @@ from ssl_core.srp import SOUND_SPEED, SteeringTable, tdoa_table
 # rescan memory {0.6, 0.8, 1.2 s} x covariance memory {1.5, 3 s} on the real-chain rooms of
 # tests/test_hearing.py, and again of g {2, 3} x memory {0.8, 1.2, 2 s} with the peak-elsewhere rule; with
 # the onset weight, on the tuning rooms (DEV_ROOM_CASES): g 3 over 2, rescan memory 1.6 s over 0.4 / 0.8 /
-# 2.4 / 3.2 s, covariance memory 1.5 over 3 s (docs/hearing.md, "The interference rescan"); ridge: 1 % of the mean
+# 2.4 / 3.2 s, covariance memory 1.5 over 3 s (docs/design/hearing.md, "The interference rescan"); ridge: 1 % of the mean
 # eigenvalue keeps R invertible where few frames have filled it (0.1 % and 10 % measured within a few
 # windows of it per room).
 _NOVELTY_GAIN = 3.0
 _NOVELTY_RIDGE = 0.01
 # The rescan's onset weight clip(1 - g_on Pbar / P, 0, 1) (Localizer._onset_weights): g_on 2 and the 64 ms
 # memory (LocalizerConfig.onset_memory_s) sit in the middle of a plateau on the first six tuning rooms
-# (tests/sound_dataset.py DEV_ROOM_CASES, docs/hearing.md): her -6 dB windows detected 77-79 % for g_on 1.5-3 x memory
+# (tests/sound_dataset.py DEV_ROOM_CASES, docs/design/hearing.md): her -6 dB windows detected 77-79 % for g_on 1.5-3 x memory
 # 32-128 ms, except g_on 1.5 at 128 ms (73 %); g_on 4 was no better on all eight.
 _ONSET_GAIN = 2.0
 _TABLE_BYTES_PER_POINT_PAIR = 48  # peak bytes of building the tables, per fine point and pair: tracemalloc, 45-48 at 0.5-1.5 deg
@@ -59,7 +59,7 @@ _TABLE_BYTES_PER_POINT_PAIR = 48  # peak bytes of building the tables, per fine 
 
 def _one_blas_thread():
     """Pin BLAS to one thread for the hot path: its matrices are small, so OpenBLAS's default
-    thread pool only burns CPU (measured 2.3x-21x, issue 11). threadpoolctl when installed."""
+    thread pool only burns CPU (measured 2.3x-21x). threadpoolctl when installed."""
     global _BLAS
     if _BLAS is None:
         try:
@@ -549,7 +549,7 @@ class Localizer:
 
         Why: a machine's spatial signature in a reverberant room is its room transfer function, direct
         path plus reflections; masking its direct-path TDOA leaves the reflections, which outnumbered
-        a talker's direct path in the rescan (measured, docs/hearing.md). ``R`` holds all of it, so frames that
+        a talker's direct path in the rescan (measured, docs/design/hearing.md). ``R`` holds all of it, so frames that
         only repeat the machine get ``q`` near 1 and weight 0. Projecting the dominant eigenvector out of
         the spectra instead (``X - u u^H X``) did not help: at low frequencies every steering vector of a
         15 cm array lies near ``u``, and the projection scrambles the talker's phases there (measured)."""

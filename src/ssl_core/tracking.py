@@ -101,7 +101,7 @@ class TrackerConfig:
     speed_memory_s: float = 3.0               # s
     # A new track starts nearly at rest, as in ODAS (its velocity prior is sigmaQ^2 = 1e-6): velocities
     # fitted to a few noisy detections otherwise carry a sparse talker's track away (measured with the
-    # localizer's significance gate of issue 11, SNR 5 dB: 10 deg/s tracked 26 of 36 active seconds,
+    # localizer's significance gate, SNR 5 dB: 10 deg/s tracked 26 of 36 active seconds,
     # 5 deg/s 29); a walker is picked up through sigma_a.
     initial_speed_sigma_deg: float = 5.0      # deg/s
     # Hypothesis priors: ODAS defaults (config/odaslive/*.cfg, sst: Ptrack, Pnew, Pfalse).
@@ -120,7 +120,7 @@ class TrackerConfig:
     power_spread_decades: float = 0.22
     # Birth: 3 hits in the first 8 windows (1 s of 128 ms windows). ODAS asks N_prob = 5 frames of 8 ms
     # with mean P(tracked) >= 0.8. Speech reaches the localizer in syllable bursts of 1-3 windows with
-    # gaps of 3-8 (measured at SNR 5 dB with the significance gate of issue 11): 3-of-5 confirmed such
+    # gaps of 3-8 (measured at SNR 5 dB with the significance gate): 3-of-5 confirmed such
     # talkers seconds late (19 of 36 active seconds tracked; 3-of-8: 26, and 29 with the slow start
     # below). 3-of-8 keeps strong false detections in 10 % of windows to ~1 false track per 15 h
     # (module docstring).
@@ -133,7 +133,7 @@ class TrackerConfig:
     silence_s: float = 4.0
     # Activity filter. Mean talk spurt 1.0 s and pause 1.6 s of conversational speech: ITU-T P.59
     # (artificial conversational speech; 1.004 s and 1.587 s). Hit rates: the localizer
-    # detects an active talker in ~90 % of 128 ms windows at SNR 20 dB (issue 11), fewer in noise; a
+    # detects an active talker in ~90 % of 128 ms windows at SNR 20 dB, fewer in noise; a
     # silent source's gate (~0.1 sr, 1 % of the sphere) catches a false peak in at most a few % of windows.
     talk_s: float = 1.0
     pause_s: float = 1.6

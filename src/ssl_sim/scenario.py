@@ -286,7 +286,7 @@ def _check_world(world: World, sc: Scenario, where: str) -> None:
         raise ScenarioError(f"{where}robot.start: ({x}, {y}) overlaps obstacle {hit} ({b.kind} at "
                             f"{list(b.center)}); the robot needs {RobotModelConfig().bumper_radius} m of free floor")
     # Refused rather than settled: on debris the physics shoves the robot before its first command (measured in
-    # light_rubble: up to 11 cm and 11 deg within 1 s; issue 14 saw 0.19 m and -96 deg), and its odometry would
+    # light_rubble: up to 11 cm and 11 deg within 1 s; up to 0.19 m and -96 deg measured elsewhere), and its odometry would
     # start from a pose it is not at.
     r = RobotModelConfig().bumper_radius
     for k, b in enumerate(world.obstacles):

@@ -137,7 +137,7 @@ def parse_rerun_target(target: str) -> tuple[str, str | None]:
 
 def viewer_problem(mode: str, arg: str | None, timeout_s: float = VIEWER_TIMEOUT_S) -> str | None:
     """Why a ``spawn`` / ``connect`` viewer cannot work here, or None. Checked before connecting, since
-    rerun's own connection retries in the background and its flush then blocks (issue 14)."""
+    rerun's own connection retries in the background and its flush then blocks."""
     if mode == "spawn":
         if sys.platform.startswith("linux") and not (os.environ.get("DISPLAY") or os.environ.get("WAYLAND_DISPLAY")):
             return "no display to spawn a viewer on (DISPLAY and WAYLAND_DISPLAY are unset)"

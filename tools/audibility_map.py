@@ -21,11 +21,11 @@ after 1 s: the mid-room caller within 1.5 m, pump over 2.5 m away, 21/42 -> 27/4
 under the slab within 1.5 m 13/27 -> 11/27, 1.5-2.5 m 5/42 -> 7/42, beyond 8/141 -> 9/141; 98 of the scan's
 435 detections near no caller. The scan does not hear either caller from farther away.
 
-Per point (``--per-point``; measured in session 9 on dense_pump the same way, 6 listens per point on the 0.3 m
+Per point (``--per-point``; measured on dense_pump the same way, 6 listens per point on the 0.3 m
 grid's points within 2.6 m of the caller in the void): she is detected only from north of her slab, in 1-3 of 4-6 sounding listens per point at
 y = 4.05-4.65 m, x = 0.45-2.25 m, and 4 of 4 at (2.25, 3.75); from her east and south in none.
 
-Run: ``.venv/bin/python benchmarks/bench_audibility.py dense_pump [--step 0.5] [--listens 6] [--scan-s 3]
+Run: ``.venv/bin/python tools/audibility_map.py dense_pump [--step 0.5] [--listens 6] [--scan-s 3]
 [--points X,Y;X,Y] [--per-point]``
 """
 from __future__ import annotations
@@ -67,7 +67,7 @@ def _by_band(rows: list, k: int, sounding, hit) -> dict[str, list[int]]:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("scenario")
+    ap.add_argument("scenario", nargs="?", default="dense_pump", help="shipped name or .toml (default dense_pump)")
     ap.add_argument("--seed", type=int, default=0)
     ap.add_argument("--step", type=float, default=0.5, help="grid spacing (m)")
     ap.add_argument("--listens", type=int, default=6, help="listens per grid point")

@@ -1,13 +1,14 @@
 """The first leg of stored rescue runs: where its metres went, and a paired comparison of two sets of runs.
 
-Reads the per-run JSON files that ``/tmp/abrun.py``-style sweeps store (``<dir>/<scenario>_<seed>.json`` with
-``victims``, ``events`` as strings, ``listens`` with the true pose of every listen), so nothing is simulated again.
+Reads the ``results.json`` that ``ssl-rescue run SCENARIO --seed N --out DIR`` writes (``victims``, ``events`` as
+strings, ``listens`` with the true pose of every listen), found anywhere below each directory given and matched by
+the scenario and seed they record, so nothing is simulated again.
 For each run the first leg (start -> first find) is cut at its listens; the straight distance between two listens'
 true positions goes to what the behaviour decided after the first of them:
 
 * ``toward next`` / ``toward other caller``: a ``target`` whose estimate lies, seen from the robot's true position,
   within 20 deg of the bearing to the caller found at the end of the leg / to another caller (a probe's estimate
-  is a guess along the bearing, so the bearing decides, as in ``bench_spl_breakdown.py``);
+  is a guess along the bearing, so the bearing decides, as in ``spl_breakdown.py``);
 * ``ghost``: a target more than 20 deg from every caller (a mirror image, two callers' rays crossing);
 * ``baseline step`` (a step across a bearing), ``explore``; the rest of the leg's true path (back-offs,
   escapes, detours between listens) is ``recoveries and detours``.
@@ -15,7 +16,8 @@ true positions goes to what the behaviour decided after the first of them:
 With a second directory: per-run SPL, the paired difference (mean and its standard error over the seeds), each
 leg's mean SPL, finds and false founds. Prints one JSON line at the end.
 
-Run: ``python benchmarks/bench_first_leg.py /tmp/base6 /tmp/spl6_E/out --seeds 0:16``
+Run: ``for s in $(seq 0 15); do ssl-rescue run light_rubble_three --seed $s -q --out runs/a/$s; done``, the same
+for the other code into ``runs/b``, then ``python tools/first_leg_breakdown.py runs/a runs/b --seeds 0:16``
 """
 from __future__ import annotations
 
@@ -28,7 +30,7 @@ from pathlib import Path
 
 import numpy as np
 
-NEAR_DEG = 20.0   # a target's bearing this close to a caller's is toward her (bench_spl_breakdown's PROBE_BEARING_DEG)
+NEAR_DEG = 20.0   # a target's bearing this close to a caller's is toward her (spl_breakdown's PROBE_BEARING_DEG)
 TARGET = re.compile(r"\btarget\b.*#(\d+) at \(([-\d.]+), ([-\d.]+)\) m")
 
 
@@ -73,11 +75,14 @@ def first_leg(run: dict) -> dict[str, float]:
 
 
 def _load(directory: Path, scenario: str, seeds: range) -> dict[int, dict]:
+    """The runs of ``scenario`` with a seed in ``seeds`` among the ``results.json`` files below ``directory``."""
     runs = {}
-    for s in seeds:
-        f = directory / f"{scenario}_{s}.json"
-        if f.exists():
-            runs[s] = json.loads(f.read_text())
+    for f in sorted(directory.rglob("results.json")):
+        run = json.loads(f.read_text())
+        if run.get("scenario") == scenario and run.get("seed") in seeds:
+            if run["seed"] in runs:
+                raise SystemExit(f"{f}: a second run of {scenario} seed {run['seed']} in {directory}")
+            runs[run["seed"]] = run
     return runs
 
 
@@ -104,7 +109,7 @@ def _summary(label: str, runs: dict[int, dict]) -> dict:
 
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
-    ap.add_argument("base", type=Path, help="directory of stored runs (<scenario>_<seed>.json)")
+    ap.add_argument("base", type=Path, help="directory of stored runs (results.json of ssl-rescue run, any depth)")
     ap.add_argument("new", type=Path, nargs="?", help="a second directory, compared seed by seed with the first")
     ap.add_argument("--scenario", default="light_rubble_three")
     ap.add_argument("--seeds", default="0:16", help="START:STOP (stop exclusive)")
@@ -112,14 +117,14 @@ def main() -> None:
     a, b = (int(v) for v in args.seeds.split(":"))
     base = _load(args.base, args.scenario, range(a, b))
     if not base:
-        ap.error(f"base: no {args.scenario}_<seed>.json for seeds {a}-{b - 1} in {args.base}")
+        ap.error(f"base: no results.json of {args.scenario} seeds {a}-{b - 1} in {args.base}")
     result = {"bench": "first_leg", "scenario": args.scenario, "seeds": [a, b],
               "base": _summary(str(args.base), base)}
     if args.new is not None:
         new = _load(args.new, args.scenario, range(a, b))
         seeds = sorted(set(base) & set(new))
         if not seeds:
-            ap.error(f"new: no {args.scenario}_<seed>.json of a seed in {args.base} in {args.new}")
+            ap.error(f"new: no results.json of {args.scenario} with a seed of {args.base} in {args.new}")
         result["new"] = _summary(str(args.new), {s: new[s] for s in seeds})
         d = np.array([new[s]["spl"] - base[s]["spl"] for s in seeds])
         f = np.array([_legs(new[s])[0]["spl"] if _legs(new[s]) else 0.0 for s in seeds]) \

@@ -16,7 +16,7 @@ run, deterministic per seed) the behaviour's events cut the true trajectory into
 
 Prints the metres per category over all legs that end in a find, the worst legs, and one JSON line.
 
-Run: ``nice .venv/bin/python benchmarks/bench_spl_breakdown.py --scenario light_rubble_three --seeds 0:16
+Run: ``nice .venv/bin/python tools/spl_breakdown.py --scenario light_rubble_three --seeds 0:16
 --time-limit 180 --workers 2``
 """
 from __future__ import annotations

@@ -9,7 +9,7 @@ rescue's ``robot.listening.Listener`` with the voice scan off and on. Per victim
 detections more than 15 deg in azimuth from every source, ``voiced ghosts`` those with speech. The runs'
 paths are the shipped behaviour's, so the listens are the poses the robot really listens from.
 
-Run: ``.venv/bin/python benchmarks/bench_listens.py --scenario dense_pump --seeds 0:4``; prints a markdown
+Run: ``.venv/bin/python tools/listen_replay.py --scenario dense_pump --seeds 0:4``; prints a markdown
 table, then one JSON line.
 """
 from __future__ import annotations
