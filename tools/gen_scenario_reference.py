@@ -1,0 +1,133 @@
+"""Write ``docs/scenario.md``, the scenario TOML reference, from the code that reads a scenario.
+
+Sections of plain keys come from the loader's own key sets (``ssl_sim.scenario``); the sections that configure a
+stage list the fields of that stage's frozen config dataclass with their type, default and the comment written
+beside the field in the source. A new field therefore appears here once this script runs, and
+``tests/test_docs.py`` fails until it has.
+
+Run: ``python tools/gen_scenario_reference.py``.
+"""
+from __future__ import annotations
+
+import dataclasses
+import inspect
+import re
+from pathlib import Path
+
+from robot.coverage import CoverageConfig
+from robot.motion import MotionConfig
+from robot.occupancy import OccupancyConfig
+from robot.planner import PlannerConfig
+from robot.rescue import RescueConfig
+from robot.sound_map import SoundMapConfig
+from ssl_core.localizer import LocalizerConfig
+from ssl_sim import scenario as S
+from ssl_sim.acoustics import AcousticConfig, AmbientNoise
+
+ROOT = Path(__file__).resolve().parents[1]
+OUT = ROOT / "docs" / "scenario.md"
+
+#: Plain keys: what each means (the loader's key sets decide which keys exist; a key without a line here fails).
+KEYS = {
+    "": {"name": "scenario name (default: the file name)", "description": "one line shown by `ssl-rescue list`",
+         "seed": "default run seed (voices, noise, sensor, generated scenes)", "time_limit_s": "simulated seconds",
+         "success_radius_m": "a victim counts as found when the robot declares it within this horizontal distance "
+                             "of the array centre (m, truth)",
+         "scene": "table: where", "robot": "table: the start pose", "victims": "array of tables: who calls",
+         "interferers": "array of tables: what else sounds", "noise": "table: diffuse ambient noise",
+         "acoustics": "table: the acoustic simulation", "localizer": "table: the localization engine",
+         "behaviour": "table: the rescue decisions", "motion": "table: motion primitives",
+         "sound_map": "table: the sound map", "planner": "table: the planner", "occupancy": "table: the obstacle grid",
+         "coverage": "table: listening coverage"},
+    "scene": {"name": "a named scene (`empty_lab`, `light_rubble`, `dense_collapsed_room`)",
+              "file": "a scene TOML file, relative to the scenario", "generate": "a generator preset name",
+              "seed": "the generator's seed (default: the run seed)",
+              "use_scene_victims": "add the scene's own victim sites (default: only without [[victims]])"},
+    "robot": {"start": "[x, y, yaw]: world m, m, rad (default: the scene's start)"},
+    "victims": {"position": "[x, y, z] of the mouth, world m", "scene_victim": "index of a victim site of the scene",
+                "sound": "what the victim does (a call, moans, knocks: see ssl_sim.acoustics.voices)",
+                "speaker": "a simulated voice's name", "level_db_spl": "level at 1 m (dB SPL)",
+                "buried": "0..1: how much debris covers the mouth", "period_s": "time between calls (s)",
+                "p_event": "probability of a call per period", "file": "a WAV recording to play instead",
+                "name": "a name for the outputs"},
+    "interferers": {"kind": "what it is (pump, generator, ...)", "position": "[x, y, z], world m",
+                    "level_db_spl": "level at 1 m (dB SPL)", "speaker": "a simulated voice (a non-victim talker)",
+                    "file": "a WAV recording to play", "name": "a name for the outputs"},
+}
+PLAIN_KEYS = {"": S._TOP_KEYS, "scene": {"name", "file", "generate", "seed", "use_scene_victims"},
+              "robot": {"start"}, "victims": S._VICTIM_KEYS,
+              "interferers": {"kind", "position", "level_db_spl", "speaker", "file", "name"}}
+#: Stage sections: TOML table -> config dataclass (and the subset of fields read, if not all).
+STAGES = {"noise": (AmbientNoise, None), "acoustics": (AcousticConfig, S.ACOUSTIC_FIELDS),
+          "localizer": (LocalizerConfig, None), "behaviour": (RescueConfig, None), "motion": (MotionConfig, None),
+          "sound_map": (SoundMapConfig, None), "planner": (PlannerConfig, None),
+          "occupancy": (OccupancyConfig, None), "coverage": (CoverageConfig, None)}
+
+
+def _comments(cls) -> dict[str, str]:
+    """The comment on each field's line (and its continuation lines) in the class source."""
+    out: dict[str, str] = {}
+    current = None
+    for line in inspect.getsource(cls).splitlines():
+        m = re.match(r"\s{4}(\w+)\s*:\s*[^#]*?(?:#\s*(.*))?$", line)
+        if m and not line.strip().startswith("#"):
+            current = m.group(1)
+            out[current] = (m.group(2) or "").strip()
+        elif current and re.match(r"\s+#\s{10,}", line):
+            out[current] = (out[current] + " " + line.strip().lstrip("#").strip()).strip()
+        else:
+            current = None
+    return out
+
+
+def _default(f) -> str:
+    if f.default is not dataclasses.MISSING:
+        return repr(f.default)
+    if f.default_factory is not dataclasses.MISSING:
+        return repr(f.default_factory())
+    return "required"
+
+
+def all_fields() -> list[tuple[str, str]]:
+    """(section, field) of every key a scenario may hold; section '' is the top level."""
+    out = [(sec, k) for sec, keys in PLAIN_KEYS.items() for k in sorted(keys)]
+    for sec, (cls, only) in STAGES.items():
+        out += [(sec, f.name) for f in dataclasses.fields(cls) if f.init and (only is None or f.name in only)]
+    return out
+
+
+def _cell(text: str) -> str:
+    return text.replace("|", "/").replace("\n", " ")
+
+
+def render() -> str:
+    lines = ["# Scenario TOML reference", "",
+             "Generated by `tools/gen_scenario_reference.py` from the code that reads a scenario; do not edit by hand.",
+             "A scenario is a TOML file (the shipped ones are in `src/ssl_sim/scenarios/`); `ssl-rescue run FILE.toml`",
+             "runs it. Units are SI in the world frame (m, s, rad); every value is checked at load time and an error",
+             "names the file and the field. Unknown keys are refused.", ""]
+    for sec, keys in PLAIN_KEYS.items():
+        title = "top level" if not sec else (f"[[{sec}]]" if sec in ("victims", "interferers") else f"[{sec}]")
+        lines += [f"## [{sec}]" if sec else "## [top level]", "", f"Keys of {title}.", "", "| key | meaning |", "|---|---|"]
+        for k in sorted(keys):
+            if k not in KEYS[sec]:
+                raise SystemExit(f"tools/gen_scenario_reference.py: no description of [{sec}] {k}: add one to KEYS")
+            lines.append(f"| `{k}` | {_cell(KEYS[sec][k])} |")
+        lines.append("")
+    for sec, (cls, only) in STAGES.items():
+        doc = (inspect.getdoc(cls) or "").split("\n\n")[0].replace("\n", " ")
+        lines += [f"## [{sec}]", "", f"Fields of `{cls.__module__}.{cls.__name__}`: {doc}", "",
+                  "| field | type | default | note (from the source) |", "|---|---|---|---|"]
+        notes = _comments(cls)
+        for f in dataclasses.fields(cls):
+            if not f.init or (only is not None and f.name not in only):
+                continue
+            typ = f.type if isinstance(f.type, str) else getattr(f.type, "__name__", str(f.type))
+            lines.append(f"| `{f.name}` | `{_cell(str(typ))}` | `{_cell(_default(f))}` | {_cell(notes.get(f.name, ''))} |")
+        lines.append("")
+    return "\n".join(lines).rstrip("\n") + "\n"
+
+
+if __name__ == "__main__":
+    OUT.write_text(render())
+    print(f"wrote {OUT.relative_to(ROOT)}")
