@@ -65,19 +65,65 @@ STAGES = {"noise": (AmbientNoise, None), "acoustics": (AcousticConfig, S.ACOUSTI
 
 
 def _comments(cls) -> dict[str, str]:
-    """The comment on each field's line (and its continuation lines) in the class source."""
+    """Per field, the comment on its line (with its continuation lines), else the comment block just above it."""
     out: dict[str, str] = {}
-    current = None
+    current, above = None, []
     for line in inspect.getsource(cls).splitlines():
+        stripped = line.strip()
         m = re.match(r"\s{4}(\w+)\s*:\s*[^#]*?(?:#\s*(.*))?$", line)
-        if m and not line.strip().startswith("#"):
+        if m and not stripped.startswith("#") and not stripped.startswith(("def ", "@")):
             current = m.group(1)
-            out[current] = (m.group(2) or "").strip()
+            out[current] = (m.group(2) or "").strip() or " ".join(above)
+            above = []
         elif current and re.match(r"\s+#\s{10,}", line):
-            out[current] = (out[current] + " " + line.strip().lstrip("#").strip()).strip()
-        else:
+            out[current] = (out[current] + " " + stripped.lstrip("#").strip()).strip()
+        elif re.match(r"\s{4}#", line):
             current = None
+            above.append(stripped.lstrip("#:").strip())
+        else:
+            current, above = None, []
     return out
+
+
+def _meaning(comment: str) -> str:
+    """The comment's first clause: what the field is (its measured justification belongs to docs/design/)."""
+    comment = re.sub(r"\s*\([^()]*\bseeds?\b[^()]*\)", "", comment)  # which runs measured it: docs/design/
+    cut = len(comment)
+    for sep in (". ", "; ", " Measured", " measured"):
+        i = comment.find(sep, 12)  # not within a lead such as "... and"
+        if 0 < i < cut:
+            cut = i
+    i = comment.find(": ", 12)
+    if 0 < i < cut and re.search(r"\bseeds?\b", comment[i:cut]):  # the example that measured it
+        cut = i
+    return comment[:cut].rstrip(" ,:")
+
+
+def _from_docstring(cls, name: str) -> str:
+    """What the class docstring says of ``name``: its ````name````: entry, or the sentence that names it."""
+    doc = " ".join((inspect.getdoc(cls) or "").split())
+    m = re.search(rf"``{name}``\s*:\s*(.+?)(?=\s``\w+``\s*:|\.\s|$)", doc)
+    if m:
+        return m.group(1).strip()
+    for sentence in re.split(r"(?<=\.)\s", doc):
+        if f"``{name}``" in sentence:
+            return sentence.replace("``", "`").strip()
+    return ""
+
+
+def _from_comment_naming(cls, name: str) -> str:
+    """The sentence of a comment in the class body that names the field (a comment block over a group of fields)."""
+    text = " ".join(l.strip().lstrip("#").strip() for l in inspect.getsource(cls).splitlines() if l.strip().startswith("#"))
+    for sentence in re.split(r"(?<=\.)\s", text):
+        if re.search(rf"\b{name}\b", sentence):
+            return _meaning(sentence.replace("``", "`")) or sentence
+    return ""
+
+
+def meaning(cls, name: str, comments: dict[str, str]) -> str:
+    """One line on what a config field is: its source comment's first clause, else the class docstring, else a
+    comment of the class body that names it."""
+    return _meaning(comments.get(name, "")) or _from_docstring(cls, name) or _from_comment_naming(cls, name)
 
 
 def _default(f) -> str:
@@ -116,14 +162,20 @@ def render() -> str:
         lines.append("")
     for sec, (cls, only) in STAGES.items():
         doc = (inspect.getdoc(cls) or "").split("\n\n")[0].replace("\n", " ")
-        lines += [f"## [{sec}]", "", f"Fields of `{cls.__module__}.{cls.__name__}`: {doc}", "",
-                  "| field | type | default | note (from the source) |", "|---|---|---|---|"]
+        if doc.startswith(cls.__name__ + "("):  # the dataclass's generated signature, no docstring
+            doc = ""
+        lines += [f"## [{sec}]", "", f"Fields of `{cls.__module__}.{cls.__name__}`{': ' + doc if doc else '.'}", "",
+                  "| field | type | default | meaning (from the source's comment) |", "|---|---|---|---|"]
         notes = _comments(cls)
         for f in dataclasses.fields(cls):
             if not f.init or (only is not None and f.name not in only):
                 continue
             typ = f.type if isinstance(f.type, str) else getattr(f.type, "__name__", str(f.type))
-            lines.append(f"| `{f.name}` | `{_cell(str(typ))}` | `{_cell(_default(f))}` | {_cell(notes.get(f.name, ''))} |")
+            text = meaning(cls, f.name, notes)
+            if not text:
+                raise SystemExit(f"tools/gen_scenario_reference.py: [{sec}] {f.name} ({cls.__name__}) has no comment "
+                                 f"in the source and no mention in the class docstring: document it there")
+            lines.append(f"| `{f.name}` | `{_cell(str(typ))}` | `{_cell(_default(f))}` | {_cell(text)} |")
         lines.append("")
     return "\n".join(lines).rstrip("\n") + "\n"
 

@@ -47,7 +47,7 @@ class OccupancyConfig:
     #                                  at one place make an obstacle (the robot does not retry one forever)
     free_log_odds: float = -0.4      # per footprint pass (five passes outweigh one contact)
     occupied_log_odds: float = 1.0   # a cell at or above this is an obstacle
-    max_log_odds: float = 6.0
+    max_log_odds: float = 6.0        # clamp of a cell's log-odds (a confirmed cell can still be cleared)
     range_hit_log_odds: float = 0.7   # per ray return: two returns make an obstacle (one alone may be the floor
     #                                   seen by a tilted robot on rubble)
     range_sure_m: float = 0.35        # a return this close is an obstacle at once: the floor seen by a tilted ray

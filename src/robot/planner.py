@@ -82,7 +82,7 @@ class PlannerConfig:
     stale_s: float = 45.0              # a source not classified victim and unheard this long is no target
     max_sigma_m: float = 20.0          # not a target while more uncertain (a bearing above the horizon: no range)
     probe_sigma_m: float = 1.0         # more uncertain than this: drive probe_distance_m along its bearing
-    probe_distance_m: float = 1.5
+    probe_distance_m: float = 1.5      # how far a probe drives along an unranged source's bearing
     probe_angle_deg: float = 30.0      # ... that far off the bearing (a baseline for triangulation)
     min_listens: int = 2               # an interferer is checked once heard this often (not a stray reflection)
     # An unclassified source (no voice heard) is a target once heard in this many listens: one listen's peak beside
@@ -93,8 +93,8 @@ class PlannerConfig:
     min_unknown_listens: int = 2
     stop_radius_m: float = 0.35        # plan to within this of a source's estimate
     unreachable_retry_s: float = 60.0  # a target without a path (or that bumps too often) is skipped this long
-    explore_distance_m: float = 1.2
-    explore_headings: int = 16
+    explore_distance_m: float = 1.2    # exploration candidates lie this far from the robot
+    explore_headings: int = 16         # ... in this many directions
     # An unclassified source never heard with speech this close to a mapped interferer is taken for its image
     # (reflections off the rubble around a machine) and not approached: dense_pump seed 0 chased five
     # voiceless sources 0.9-1.5 m from the pump for 150 s, rejecting each from close up.

@@ -86,8 +86,8 @@ class LocalizerConfig:
     band_hz: tuple[float, float] | None = (300.0, 6000.0)
     resolution_deg: float = 1.5           # fine grid spacing
     coarse_resolution_deg: float = 5.0    # coarse search grid spacing
-    el_min_deg: float = -90.0
-    el_max_deg: float = 90.0
+    el_min_deg: float = -90.0             # lowest elevation searched (degrees, array frame)
+    el_max_deg: float = 90.0              # highest elevation searched (degrees, array frame)
     radius_m: float | None = None         # grid radius; None = far field
     n_sources: int = 1                    # at most this many detections per window
     min_separation_deg: float = 20.0      # between two detections
@@ -114,10 +114,10 @@ class LocalizerConfig:
     # The rescan's bins are also weighted by their onset (Localizer._onset_weights): power above the recent
     # mean of the same bin, memory ``onset_memory_s``. At a speech onset the direct path leads the room's
     # response (the precedence effect), so these bins carry her direction, not the echoes of her or of the machine.
-    interference_rescan: bool = False
-    interference_memory_s: float = 1.5
-    rescan_memory_s: float = 1.6
-    onset_memory_s: float = 0.064
+    interference_rescan: bool = False     # search the second source in bins that depart from the recent covariance
+    interference_memory_s: float = 1.5    # memory of the spatial covariance the rescan departs from (s)
+    rescan_memory_s: float = 1.6          # memory of the rescan's GCC summed over windows (s)
+    onset_memory_s: float = 0.064         # memory of the per-bin mean an onset rises above (s)
     upsample: int = 4                     # GCC interpolation factor
     sound_speed: float = SOUND_SPEED      # m/s
 

@@ -23,8 +23,8 @@ class AmbientNoise:
     """Diffuse background noise: broadband (unweighted) sound pressure level ``level_db_spl`` at
     the microphones, spectrum ``white|pink|brown|hvac|speech``."""
 
-    level_db_spl: float = 30.0
-    spectrum: str = "hvac"
+    level_db_spl: float = 30.0  # broadband (unweighted) level at the microphones (dB SPL)
+    spectrum: str = "hvac"  # white, pink, brown, hvac or speech-shaped
 
     def __post_init__(self) -> None:
         if not np.isfinite(self.level_db_spl) or not -40.0 <= self.level_db_spl <= 140.0:

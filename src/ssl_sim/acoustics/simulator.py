@@ -65,17 +65,17 @@ class AcousticConfig:
     fs: int = 16000
     c: float = 343.0
     ism_order: int = 3
-    ism_budget: float = 3e7
+    ism_budget: float = 3e7  # image-source search cost allowed (~ surfaces ** order); the order drops to fit
     late_reverb: bool = True
     rt60_s: float | None = None
     max_rir_s: float = DEFAULT_MAX_RIR_S
     visibility_grid_m: float = 0.05
     position_quantum_m: float = 1e-4
-    min_obstacle_extent_m: float = 0.05
+    min_obstacle_extent_m: float = 0.05  # boxes whose largest side is smaller are ignored (small at speech wavelengths)
     ambient: AmbientNoise | None = field(default_factory=AmbientNoise)
     sensor: SensorConfig = field(default_factory=SensorConfig)
     seed: int = 0
-    rir_cache_size: int = 32
+    rir_cache_size: int = 32  # room impulse responses kept per simulator (poses revisited are not recomputed)
     diffraction: bool = True
     noise_loop_s: float | None = None
     obstacle_order: int | None = None
