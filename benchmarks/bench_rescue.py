@@ -48,8 +48,8 @@ from _results import write_result  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ["paper_lab", "light_rubble_three", "dense_pump", "behind_partition", "half_buried_slab"]
-OPTIONAL = ["generator_louder"]        # the voice issue's machine-louder scenario, when present
-TIME_LIMITS = {"light_rubble_three": 180.0}   # the target is with a 180 s limit
+OPTIONAL = ["generator_louder"]        # the machine-louder scenario, when present
+TIME_LIMITS = {"light_rubble_three": 180.0}   # the target is set with a 180 s limit
 NEW_SECTIONS = ("motion", "sound_map", "planner", "occupancy")
 
 

@@ -9,7 +9,7 @@ machines, other azimuths, robot position and simulation seed). For each localize
   (``her det``), per window of all seconds a detection farther than 20 deg from both sources (``ghost``);
 - through ``Localizer -> Tracker -> Hearing`` as in tests/test_hearing.py: her track VOICE in her talking
   1 s windows and the machine's NON_VOICE in all windows at SIR -6 dB; a VOICE track within 10 deg of her
-  at SIR 0 dB (the issue's 90 / 95 / 70 % requirements).
+  at SIR 0 dB (the 90 / 95 / 70 % requirements).
 
 With ``--hear scan_step_deg=15`` the hearing's voice scan feeds its detections to the tracker (as in
 tests/test_hearing.py); its columns: her talking seconds with a scan detection within 10 deg of her, scan

@@ -104,7 +104,7 @@ def test_victim_behind_knee_high_slab_is_heard_from_the_top_edge():
     to_edge, to_ceiling = _slab_localization(diffraction=True)
     assert to_edge < 5.0, f"{to_edge:.1f} deg from the slab's top edge"
     assert to_ceiling > 30.0
-    # Without diffraction the blocked victim is heard elsewhere (the measured failure).
+    # Without diffraction the blocked victim is heard elsewhere (a reflection wins).
     to_edge_off, _ = _slab_localization(diffraction=False)
     assert to_edge_off > 10.0
 

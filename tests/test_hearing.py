@@ -208,7 +208,7 @@ def _room_run(talker, machine, az_t, az_m, seconds=16):
 def test_given_tracks_at_the_true_directions_talker_is_voice_and_louder_machine_is_not():
     """RT60 0.6 s, machine 6 dB louder (active speech level vs machine RMS), 80-180 deg apart, 2 m.
     The hearing alone: tracks are made by hand at the true directions, always active (pauses count
-    against the talker). The issue's requirement through the real chain is the test below."""
+    against the talker). The requirement through the real chain is the test below."""
     voice_ok, machine_ok, report = [], [], []
     for case in ROOM_CASES:
         out, she_talks = _room_run(*case)

@@ -103,7 +103,7 @@ def test_voice_beside_an_equal_steady_noise_is_tracked_with_noise_suppression():
 @pytest.mark.parametrize("config", [LocalizerConfig(), _RESCAN], ids=["default", "rescan"])
 def test_no_source_gives_no_lasting_track_at_the_tracking_gate(config):
     """Diffuse noise with no source, detections at the looser gate meant for tracking: no confirmed
-    track lasts over 1 s (the issue's requirement; the tracker's confirmation is the false-alarm control)."""
+    track lasts over 1 s (the requirement; the tracker's confirmation is the false-alarm control)."""
     from dataclasses import replace
 
     from ssl_core.tracking import TRACKING_MIN_SIGNIFICANCE, Tracker

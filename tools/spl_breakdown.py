@@ -128,7 +128,7 @@ def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     ap.add_argument("--scenario", default="light_rubble_three")
     ap.add_argument("--seeds", default="0:16", help="START:STOP (stop exclusive)")
-    ap.add_argument("--time-limit", type=float, default=180.0, help="simulated s (default 180, the issue's limit)")
+    ap.add_argument("--time-limit", type=float, default=180.0, help="simulated s (default 180, the target's limit)")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--near", type=float, default=1.0, help="a target estimate this close to a caller is toward her (m)")
     args = ap.parse_args()

@@ -25,7 +25,7 @@
 #define PWM_TOP             400u      /* Timer4 phase-correct PWM, TOP = ICR4: 16 MHz / (2 * 400) = 20 kHz */
 
 /* --- safety --- */
-/* Command watchdog (issue 14: duties at zero within 300 ms of the last valid command, at any duty):
+/* Command watchdog (requirement: duties at zero within 300 ms of the last valid command, at any duty):
  * the ramp starts after more than CMD_TIMEOUT_MS without a motion command (200..201 ms with the
  * 1 ms tick) and brings every channel linearly to zero in RAMP_MS ticks, all in proportion (the
  * direction of motion is kept): zero 290..291 ms after the command, whatever the duty. */
