@@ -98,6 +98,8 @@ def main(argv: list[str] | None = None) -> int:
                     "with the exact model on fixed poses")
     add_check_option(ap)
     args = ap.parse_args(argv)
+    if args.fidelity and args.check:
+        ap.error("--check compares the loop's speed; --fidelity measures accuracy, which has no speed figure")
     sc = load_scenario(args.scenario).with_overrides(time_limit_s=args.time_limit)
     if args.fidelity:
         f = fidelity(sc)
@@ -108,8 +110,7 @@ def main(argv: list[str] | None = None) -> int:
               f"{100 * f['per_pose_within_1deg']:.0f} % within 1 deg; rendering CPU {f['render_cpu_s'][0]:.2f} / "
               f"{f['render_cpu_s'][1]:.2f} s")
         print(json.dumps({"bench": "scenario_fidelity", "scenario": sc.name, **f}))
-        return finish("scenario_fidelity", {k: v for k, v in f.items() if isinstance(v, (int, float))},
-                      check=args.check, better={})
+        return finish("scenario_fidelity", {k: v for k, v in f.items() if isinstance(v, (int, float))})
     rows = []
     for seed in [int(s) for s in args.seeds.split(",")]:
         t = time.perf_counter()
