@@ -56,3 +56,21 @@ def test_every_scenario_field_is_documented():
                if f"`{name}`" not in text.split(f"## [{section or 'top level'}]", 1)[-1].split("\n## ", 1)[0]]
     assert not missing, f"undocumented scenario fields (run python tools/gen_scenario_reference.py): {missing}"
     assert text == gen_scenario_reference.render(), "docs/scenario.md is out of date: run tools/gen_scenario_reference.py"
+
+
+HISTORY = re.compile(r"\bsessions? \d|\bsession-\d|\bissues? #?\d|\bcommit [0-9a-f]{7}|\bat [0-9a-f]{7,}\b", re.I)
+
+
+def test_docs_and_code_comments_tell_no_development_history():
+    """Design rationale is physics and measurement; which session or issue a change came from is not (the
+    provenance lines of docs/results.md name the commit a figure was measured at, on purpose)."""
+    files = [ROOT / "README.md", ROOT / "CHANGELOG.md", *(ROOT / "docs").rglob("*.md")]
+    files += [p for d in ("src", "benchmarks", "tools", "experiments", "examples") for p in (ROOT / d).rglob("*.py")]
+    found = []
+    for f in files:
+        if f.name == "results.md":
+            continue
+        for n, line in enumerate(f.read_text().splitlines(), 1):
+            if HISTORY.search(line):
+                found.append(f"{f.relative_to(ROOT)}:{n}: {line.strip()[:100]}")
+    assert not found, "history talk:\n" + "\n".join(found)
