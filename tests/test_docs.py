@@ -65,7 +65,9 @@ def test_docs_and_code_comments_tell_no_development_history():
     """Design rationale is physics and measurement; which session or issue a change came from is not (the
     provenance lines of docs/results.md name the commit a figure was measured at, on purpose)."""
     files = [ROOT / "README.md", ROOT / "CHANGELOG.md", *(ROOT / "docs").rglob("*.md")]
-    files += [p for d in ("src", "benchmarks", "tools", "experiments", "examples") for p in (ROOT / d).rglob("*.py")]
+    files += [p for d in ("src", "benchmarks", "tools", "experiments", "examples", "scripts") for p in (ROOT / d).rglob("*")
+              if p.suffix in (".py", ".toml", ".sh") and "egg-info" not in str(p)]
+    files += [p for p in (ROOT / "firmware").rglob("*") if p.suffix in (".c", ".h", ".md")]
     found = []
     for f in files:
         if f.name == "results.md":
