@@ -144,7 +144,8 @@ def main() -> None:
             u = np.array([d.direction for d in dets]).reshape(-1, 3)
             hit = (u @ truth.T >= cos_tol).any(axis=0) if len(u) else np.zeros(len(names), bool)
             # sounding in the first second (the 1 s listen's); for the scan, a second's worth anywhere in the block
-            rows.append((dist, dist[machine] if machine is not None else math.inf, _sounding(run, n0, fs, 0.1), hit,
+            rows.append((dist, dist[machine] if machine is not None else 98.0,  # no machine: the farthest band
+                         _sounding(run, n0, fs, 0.1), hit,
                          scan_hits, _sounding(run, n0, n, 0.1 * fs / n), (x, y)))
     cpu = time.process_time() - t0
     out = {"scenario": a.scenario, "points": len(points), "listens": len(rows), "cpu_s": round(cpu, 1), "callers": {}}
