@@ -96,6 +96,28 @@ def add_check_option(parser) -> None:
                              f"{CHECK_FACTOR}x worse (the stored file is left unchanged)")
 
 
+def stored_for_check(name: str, results_dir: str | Path | None = None) -> tuple[Path, dict | None, str]:
+    """The stored result a ``--check`` of this run would compare with: (path, document or None, why not)."""
+    path = (Path(results_dir) if results_dir is not None else RESULTS_DIR) / f"{name}.json"
+    if not path.exists():
+        return path, None, f"--check: no stored result {path}; run the benchmark without --check first"
+    stored = json.loads(path.read_text())
+    args = [a for a in sys.argv[1:] if a != "--check"]
+    if stored.get("argv", []) != args:
+        return path, None, (f"--check: {path.name} was measured with arguments {stored.get('argv')}, not {args}: run "
+                            f"--check with the stored arguments (or store a figure for these)")
+    return path, stored, ""
+
+
+def require_stored(name: str, check: bool) -> None:
+    """With ``check``, exit 2 at once (before measuring) when there is no stored result for these arguments."""
+    if check:
+        _path, stored, why = stored_for_check(name)
+        if stored is None:
+            print(why, file=sys.stderr)
+            raise SystemExit(2)
+
+
 def check_result(name: str, figures: Mapping[str, float], better: Mapping[str, str],
                  factor: float = CHECK_FACTOR, results_dir: str | Path | None = None) -> int:
     """Compare ``figures`` with ``<results_dir>/<name>.json``; print one line per figure; return an exit code.
@@ -104,15 +126,9 @@ def check_result(name: str, figures: Mapping[str, float], better: Mapping[str, s
     ``"higher"`` for a rate (x real time, steps per second). 0 = every checked figure within ``factor`` of the
     stored one, 1 = at least one worse by more, 2 = nothing stored to compare with (or a figure missing).
     """
-    path = (Path(results_dir) if results_dir is not None else RESULTS_DIR) / f"{name}.json"
-    if not path.exists():
-        print(f"--check: no stored result {path}; run the benchmark without --check first", file=sys.stderr)
-        return 2
-    stored = json.loads(path.read_text())
-    args = [a for a in sys.argv[1:] if a != "--check"]
-    if stored.get("argv", []) != args:
-        print(f"--check: {path.name} was measured with arguments {stored.get('argv')}, not {args}: run --check with "
-              f"the stored arguments (or store a figure for these)", file=sys.stderr)
+    path, stored, why = stored_for_check(name, results_dir)
+    if stored is None:
+        print(why, file=sys.stderr)
         return 2
     old = stored.get("figures", {})
     code = 0

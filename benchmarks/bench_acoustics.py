@@ -24,7 +24,7 @@ from dataclasses import replace
 import numpy as np
 from tqdm import tqdm
 
-from _results import add_check_option, finish
+from _results import add_check_option, finish, require_stored
 from ssl_sim.acoustics import AcousticConfig, AcousticSimulator, RobotPose
 from ssl_sim.acoustics.scene import AcousticScene
 from ssl_sim.world import VictimSite
@@ -105,6 +105,7 @@ def main() -> int:
     ap.add_argument("--quick", action="store_true", help="light rubble only, orders 1-2")
     add_check_option(ap)
     args = ap.parse_args()
+    require_stored("acoustics", args.check)
     ws = worlds()
     if args.quick:
         ws = {"light_rubble": ws["light_rubble"]}

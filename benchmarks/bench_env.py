@@ -29,7 +29,7 @@ from collections import defaultdict  # noqa: E402
 import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
 
-from _results import add_check_option, finish  # noqa: E402
+from _results import add_check_option, finish, require_stored  # noqa: E402
 from ssl_sim.envs import EnvConfig, SSLRescueEnv  # noqa: E402
 from ssl_sim.envs.fidelity import compare_fidelities, fidelity_summary  # noqa: E402
 
@@ -134,6 +134,7 @@ def main() -> int:
     ap.add_argument("--quick", action="store_true", help="fewer steps and poses")
     add_check_option(ap)
     args = ap.parse_args()
+    require_stored("env", args.check)
     n_fast, n_full, n_vec = (40, 15, 20) if args.quick else (200, 60, 100)
     seeds, poses = (range(100, 104), 6) if args.quick else (range(100, 116), 10)
 

@@ -23,7 +23,7 @@ import numpy as np  # noqa: E402
 sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 from signals import room_talker  # noqa: E402
 
-from _results import add_check_option, finish  # noqa: E402
+from _results import add_check_option, finish, require_stored  # noqa: E402
 from ssl_core.geometry import cube8  # noqa: E402
 from ssl_core.grid import direction_from_angles  # noqa: E402
 from ssl_core.health import MicHealth  # noqa: E402
@@ -45,6 +45,7 @@ def main() -> int:
     ap.add_argument("--seconds", type=float, default=10.0)
     add_check_option(ap)
     a = ap.parse_args()
+    require_stored("health", a.check)
     x = room_talker(cube8().positions, direction_from_angles(0.5, 0.2), a.seconds, FS, seed=1)
     healthy = cpu_ms_per_s(MicHealth(cube8(), devices=[0] * 4 + [1] * 4).update, x)
     swapped = cpu_ms_per_s(MicHealth(cube8(), devices=[0] * 4 + [1] * 4).update, x[[0, 1, 2, 6, 4, 5, 3, 7]])

@@ -43,7 +43,7 @@ sys.path[:0] = [str(ROOT / "src"), str(ROOT)]
 
 import numpy as np  # noqa: E402
 
-from _results import add_check_option, finish  # noqa: E402
+from _results import add_check_option, finish, require_stored  # noqa: E402
 
 FS = 16000
 HIT_DEG = 10.0
@@ -263,6 +263,7 @@ def main() -> int:
     if a.cpu_child is not None:
         print(json.dumps(cpu_child(a.cpu_child, not a.no_pin, a.cpu_sources, a.cpu_rescan)))
         return 0
+    require_stored("hearing", a.check)
     if a.quick:
         a.trials, a.seconds, a.pra_windows = 1, 2.0, 2
     tracking = _tracker_class() is not None

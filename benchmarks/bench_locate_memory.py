@@ -23,7 +23,7 @@ import numpy as np
 ROOT = Path(__file__).resolve().parents[1]
 sys.path.insert(0, str(ROOT / "src"))
 
-from _results import add_check_option, finish  # noqa: E402
+from _results import add_check_option, finish, require_stored  # noqa: E402
 from ssl_core.geometry import cube8  # noqa: E402
 from ssl_core.grid import direction_from_angles  # noqa: E402
 
@@ -57,6 +57,7 @@ def main() -> int:
     ap.add_argument("--quick", action="store_true", help="5 minutes instead")
     add_check_option(ap)
     args = ap.parse_args()
+    require_stored("locate_memory", args.check)
     minutes = 5.0 if args.quick else args.minutes
     with tempfile.TemporaryDirectory() as tmp:
         path = Path(tmp) / "long.wav"

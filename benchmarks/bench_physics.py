@@ -17,7 +17,7 @@ import time
 import mujoco
 import numpy as np
 
-from _results import add_check_option, finish
+from _results import add_check_option, finish, require_stored
 from robot.kinematics import forward_kinematics, integrate_pose
 from ssl_sim.physics import SimRobot, load_scene
 
@@ -86,6 +86,7 @@ def main() -> int:
     ap = argparse.ArgumentParser(description=__doc__.splitlines()[0])
     add_check_option(ap)
     args = ap.parse_args()
+    require_stored("physics", args.check)
     alone = speed(None, 30.0)
     dense = speed(load_scene("dense_collapsed_room"), 60.0)
     track = tracking()

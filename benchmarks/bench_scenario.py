@@ -28,7 +28,7 @@ import platform  # noqa: E402
 import time  # noqa: E402
 import warnings  # noqa: E402
 
-from _results import add_check_option, finish  # noqa: E402
+from _results import add_check_option, finish, require_stored  # noqa: E402
 from ssl_sim.runner import RescueRun  # noqa: E402
 from ssl_sim.scenario import load_scenario  # noqa: E402
 
@@ -100,6 +100,7 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     if args.fidelity and args.check:
         ap.error("--check compares the loop's speed; --fidelity measures accuracy, which has no speed figure")
+    require_stored("scenario", args.check)
     sc = load_scenario(args.scenario).with_overrides(time_limit_s=args.time_limit)
     if args.fidelity:
         f = fidelity(sc)

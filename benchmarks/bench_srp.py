@@ -21,7 +21,7 @@ import time  # noqa: E402
 import numpy as np  # noqa: E402
 import pyroomacoustics as pra  # noqa: E402
 
-from _results import add_check_option, finish  # noqa: E402
+from _results import add_check_option, finish, require_stored  # noqa: E402
 from ssl_core.geometry import cube8  # noqa: E402
 from ssl_core.grid import direction_from_angles, n_points_for_spacing  # noqa: E402
 from ssl_core.localizer import Localizer, LocalizerConfig  # noqa: E402
@@ -120,6 +120,7 @@ def main() -> int:
     ap.add_argument("--seed", type=int, default=0)
     add_check_option(ap)
     args = ap.parse_args()
+    require_stored("srp", args.check)
     try:
         os.sched_setaffinity(0, {sorted(os.sched_getaffinity(0))[0]})  # one core
     except (AttributeError, OSError):

@@ -17,7 +17,7 @@ import time  # noqa: E402
 
 import numpy as np  # noqa: E402
 
-from _results import add_check_option, finish  # noqa: E402
+from _results import add_check_option, finish, require_stored  # noqa: E402
 from ssl_core.grid import direction_from_angles  # noqa: E402
 from ssl_core.localizer import Detection  # noqa: E402
 from ssl_core.tracking import Tracker  # noqa: E402
@@ -51,6 +51,7 @@ def main() -> int:
     ap.add_argument("--seconds", type=float, default=120.0, help="audio seconds simulated (default 120)")
     add_check_option(ap)
     args = ap.parse_args()
+    require_stored("tracking", args.check)
     windows = scenario(args.seconds)
     tracker = Tracker()
     n_tracks = []

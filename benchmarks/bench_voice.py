@@ -29,7 +29,7 @@ sys.path.insert(0, str(Path(__file__).resolve().parents[1] / "tests"))
 import numpy as np  # noqa: E402
 
 from robot.vad import SileroVad, speech_fraction  # noqa: E402
-from _results import finish  # noqa: E402
+from _results import finish, require_stored  # noqa: E402
 from _voice_likeness_baseline import voice_likeness  # noqa: E402  (the hand-made score the VAD replaced)
 from sound_dataset import FS, chunk_starts, recordings  # noqa: E402
 
@@ -246,6 +246,7 @@ def main() -> int:
     if unknown:
         raise SystemExit(f"bench_voice: unknown argument(s) {unknown}; expected [--cost-only] [--check]")
     check = "--check" in sys.argv[1:]
+    require_stored("voice_cost" if "--cost-only" in sys.argv[1:] else "voice", check)
     if "--cost-only" in sys.argv[1:]:
         c = cost()
         _print_cost(c)

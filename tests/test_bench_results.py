@@ -45,3 +45,13 @@ def test_check_refuses_other_arguments_and_missing_results(stored, monkeypatch):
     assert _results.check_result("x", {"other": 1.0}, better, results_dir=stored) == 2
     with pytest.raises(ValueError, match="better"):
         _results.check_result("x", {"cpu_ms": 10.0}, {"cpu_ms": "faster"}, results_dir=stored)
+
+
+def test_require_stored_stops_before_measuring(stored, monkeypatch):
+    monkeypatch.setattr(_results, "RESULTS_DIR", stored)
+    _results.require_stored("x", check=True)          # the same arguments: go on
+    _results.require_stored("nothing_stored", check=False)   # not a check: nothing to require
+    monkeypatch.setattr(sys, "argv", ["bench_x.py", "--seconds", "60", "--check"])
+    with pytest.raises(SystemExit) as e:
+        _results.require_stored("x", check=True)
+    assert e.value.code == 2
