@@ -224,7 +224,7 @@ class RescueConfig:
     max_victims: int | None = None         # stop after finding this many (None: keep searching)
     # moving
     step_m: float = 0.6                    # longest move between two listens
-    min_step_m: float = 0.1                # shortest move worth making between two listens
+    min_step_m: float = 0.1                # checked <= step_m; no decision reads it at present
     wedged_turn_deg: float = 45.0          # turn in place when every escape move stalled without a bumper press
     #                                        (half the 120 deg wheel spacing: each wheel meets the debris anew;
     #                                        measured, light rubble seed 0 ended "stuck" on a 15 mm debris plate)
