@@ -23,7 +23,9 @@ def quiet_on_broken_pipe(main: Callable[..., int]) -> Callable[..., int]:
     @functools.wraps(main)
     def wrapper(*args, **kwargs) -> int:
         try:
-            return main(*args, **kwargs)
+            code = main(*args, **kwargs)
+            sys.stdout.flush()  # what is still buffered fails here, not in the interpreter's last flush
+            return code
         except BrokenPipeError:
             _discard_stdout()
             return EXIT_BROKEN_PIPE
