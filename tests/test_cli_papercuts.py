@@ -39,8 +39,9 @@ def talker(tmp_path_factory) -> Path:
 
 @pytest.mark.parametrize("prog", sorted(PROGRAMS))
 def test_help_loads_neither_scipy_signal_nor_the_simulator(prog):
-    """--help used to take 4-5 s importing scipy.signal, scipy.stats and the simulator before parsing."""
-    probe = (f"import sys\nfrom {PROGRAMS[prog]} import main\ntry:\n    main(['--help'])\nexcept SystemExit:\n    pass\n"
+    """--help parses before the numerical stack is imported (scipy.signal and scipy.stats alone take seconds)."""
+    probe = (f"import sys\nfrom {PROGRAMS[prog]} import main\n"
+             "try:\n    main(['--help'])\nexcept SystemExit:\n    pass\n"
              "heavy = sorted(m for m in sys.modules if m.startswith(('scipy', 'mujoco', 'pyroomacoustics', "
              "'onnxruntime', 'rerun', 'ssl_sim.scenario', 'robot.rescue', 'ssl_core.localizer')))\n"
              "print(heavy, file=sys.stderr)\nsys.exit(1 if heavy else 0)\n")

@@ -170,7 +170,7 @@ def _resampled(recording, tmp_path, rate):
 
 def test_a_48khz_replay_is_resampled_and_an_8khz_one_refused_at_start(recording, tmp_path, capsys):
     """ssl-locate analyses a 48 kHz recording; the behaviour hears at 16 kHz: the replay is resampled as it is
-    read (it used to fail mid-mission) and the talker is heard where the 16 kHz file puts it. Below 12 kHz the
+    read, from the start of the mission on, and the talker is heard where the 16 kHz file puts it. Below 12 kHz the
     localizer's band (to 6 kHz) is missing: refused before the mission starts, naming the rate."""
     code, text = run(["--dry-run", "--replay", str(_resampled(recording, tmp_path, 48000)), "--max-time", "8"])
     assert code == 0, text

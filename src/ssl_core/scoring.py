@@ -59,8 +59,9 @@ class Truth:
             for key in ("azimuth_deg", "elevation_deg", "sounding"):
                 v = s.get(key)
                 if not isinstance(v, list) or len(v) != n:
+                    got = "nothing" if v is None else f"{len(v)} values" if isinstance(v, list) else type(v).__name__
                     raise ValueError(f"{where}: sources[{k}].{key}: expected a list of {n} values (one per time_s), "
-                                     f"got {'nothing' if v is None else f'{len(v)} values' if isinstance(v, list) else type(v).__name__}")
+                                     f"got {got}")
             try:
                 dirs.append(_unit(s["azimuth_deg"], s["elevation_deg"]))
             except (TypeError, ValueError):
