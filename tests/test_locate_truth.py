@@ -118,3 +118,7 @@ def test_bad_truth_names_the_field(recording, capsys, tmp_path):
     bad.write_text(json.dumps(t))
     assert locate_main([str(wav), "--truth", str(bad)]) == 2
     assert "48000 Hz" in capsys.readouterr().err
+    t = json.loads(truth.read_text())
+    bad.write_text(json.dumps(t))
+    assert locate_main([str(wav), "--truth", str(bad), "--array", "cube8_corners"]) == 2
+    assert "frame of array 'cube8'" in capsys.readouterr().err

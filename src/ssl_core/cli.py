@@ -168,10 +168,13 @@ def _run(args) -> int:
     if args.truth is not None and fmt == "odas":
         raise _BadInput("--truth prints scores: use it with the table or --json, not --format odas")
     info = _open(args.wav)
-    truth = _truth(args, info) if args.truth is not None else None
+    truth, truth_array = _truth(args, info) if args.truth is not None else (None, None)
     loc = _localizer(args, info.fs)
     blocks = _blocks(info, loc)
     if truth is not None:
+        if truth_array is not None and truth_array != loc.geometry.name:
+            raise _BadInput(f"--truth {args.truth}: directions are in the frame of array '{truth_array}', "
+                            f"--array {args.array} is '{loc.geometry.name}'")
         return _score(args, fmt, info, loc, blocks, truth)
     try:
         found = (_per_window if args.stream or args.track else _whole)(args, fmt, info, loc, blocks)
@@ -184,7 +187,8 @@ def _run(args) -> int:
 
 
 def _truth(args, info):
-    """The ``--truth`` file as a ``ssl_core.scoring.Scorer``; bad input names the file and the field."""
+    """The ``--truth`` file as a ``ssl_core.scoring.Scorer`` and the array its directions refer to (None: not
+    said); bad input names the file and the field."""
     from ssl_core.scoring import Scorer, Truth
 
     path = args.truth
@@ -208,10 +212,7 @@ def _truth(args, info):
     if isinstance(data.get("fs"), int) and data["fs"] != info.fs:
         raise _BadInput(f"--truth {path}: is the truth of a recording at {data['fs']} Hz, {args.wav} is at "
                         f"{info.fs} Hz")
-    if isinstance(data.get("array"), str) and data["array"] != args.array:
-        raise _BadInput(f"--truth {path}: directions are in the frame of array '{data['array']}', "
-                        f"--array is {args.array!r}")
-    return scorer
+    return scorer, (data.get("array") if isinstance(data.get("array"), str) else None)
 
 
 def _score(args, fmt: str, info, loc: Localizer, blocks, scorer) -> int:
