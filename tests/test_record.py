@@ -97,8 +97,8 @@ def test_ssl_locate_finds_the_recorded_sources(recording, capsys):
     wav, truth = recording
     capsys.readouterr()
     assert locate_main([str(wav), "--array", "cube8", "--sources", "2", "--stream", "--window", "16", "--json"]) == 0
-    out = json.loads(capsys.readouterr().out)
-    found = [_unit(d["azimuth_deg"], d["elevation_deg"]) for w in out["windows"] for d in w["detections"]]
+    windows = [json.loads(line) for line in capsys.readouterr().out.splitlines()]  # one JSON line per window
+    found = [_unit(d["azimuth_deg"], d["elevation_deg"]) for w in windows for d in w["detections"]]
     true_dirs = []
     for s in truth["sources"]:
         on = np.asarray(s["sounding"])

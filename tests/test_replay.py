@@ -1,4 +1,6 @@
 """WAV replay source and dry-run drive."""
+import math
+
 import numpy as np
 import pytest
 from scipy.io import wavfile
@@ -124,3 +126,25 @@ def test_dry_run_drive_saturates_like_the_real_base():
     assert vx > 0 and abs(vy) < 1e-12 and abs(om) < 1e-12
     with pytest.raises(ValueError, match="twist"):
         drive.set_twist(float("nan"), 0.0, 0.0)
+
+
+@pytest.mark.parametrize("rate", [48000, 44100, 22050])
+def test_a_replay_at_another_rate_is_resampled_block_by_block_as_the_whole_file(tmp_path, rate):
+    """resample_to=16000: blocks of any size, read in turn, equal the whole file resampled at once
+    (scipy.signal.resample_poly), sample for sample."""
+    from scipy.signal import resample_poly
+    x = (np.random.default_rng(1).standard_normal((rate * 2 + 37, 3)) * 3000).astype(np.int16)
+    path = tmp_path / "x.wav"
+    wavfile.write(path, rate, x)
+    src = WavFileSource(path, resample_to=16000, min_rate=12000)
+    g = math.gcd(16000, rate)
+    whole = np.clip(np.round(resample_poly(x.astype(float), 16000 // g, rate // g, axis=0)), -32768, 32767).T
+    assert src.sample_rate == 16000 and src.file_rate == rate and src.n_samples == whole.shape[1]
+    blocks, sizes = [], [1600, 37, 4000, 999]
+    while src.position + sizes[len(blocks) % 4] <= src.n_samples:
+        blocks.append(src.read(sizes[len(blocks) % 4]).samples)
+    got = np.concatenate(blocks, axis=1)
+    assert got.dtype == np.int16 and np.array_equal(got, whole[:, :got.shape[1]].astype(np.int16))
+    with pytest.raises(ValueError, match="sample rate 8000 Hz is too low"):
+        wavfile.write(tmp_path / "y.wav", 8000, x)
+        WavFileSource(tmp_path / "y.wav", resample_to=16000, min_rate=12000)

@@ -77,15 +77,15 @@ def test_missing_audio_backend_is_a_clear_error(monkeypatch, capsys):
 def test_set_reaches_the_behaviours_other_configs(recording, monkeypatch):
     """``--set SECTION.FIELD=VALUE``: the odometry's loaded-wheel threshold (to be measured on the robot's
     open-loop drive) and a planner field reach the behaviour that runs the mission."""
-    import robot.cli as cli
+    import robot.rescue as rescue  # ssl-robot imports the behaviour from there once its arguments are parsed
     made = []
 
-    class Recorded(cli.RescueBehaviour):
+    class Recorded(rescue.RescueBehaviour):
         def __init__(self, *a, **kw):
             super().__init__(*a, **kw)
             made.append(self)
 
-    monkeypatch.setattr(cli, "RescueBehaviour", Recorded)
+    monkeypatch.setattr(rescue, "RescueBehaviour", Recorded)
     code, _ = run(["--dry-run", "--replay", str(recording), "--max-time", "2", "--set", "travel.loaded_speed=5.0",
                    "--set", "planner.frontier_reach_m=0.8", "--set", "listen_s=0.5",
                    "--set", "coverage.area=-1,-3,6,3"])
@@ -156,3 +156,68 @@ def test_a_failed_stop_is_reported_not_hidden(recording, monkeypatch, capsys):
     err = capsys.readouterr().err
     assert code == 1
     assert "stopping the robot FAILED: RuntimeError: drive link lost" in err and "robot stopped" not in err
+
+
+def _resampled(recording, tmp_path, rate):
+    from scipy.signal import resample_poly
+    fs, x = wavfile.read(recording)
+    g = math.gcd(rate, fs)
+    y = resample_poly(x.astype(float), rate // g, fs // g, axis=0)
+    p = tmp_path / f"rec_{rate}.wav"
+    wavfile.write(p, rate, np.clip(np.round(y), -32768, 32767).astype(np.int16))
+    return p
+
+
+def test_a_48khz_replay_is_resampled_and_an_8khz_one_refused_at_start(recording, tmp_path, capsys):
+    """ssl-locate analyses a 48 kHz recording; the behaviour hears at 16 kHz: the replay is resampled as it is
+    read, from the start of the mission on, and the talker is heard where the 16 kHz file puts it. Below 12 kHz the
+    localizer's band (to 6 kHz) is missing: refused before the mission starts, naming the rate."""
+    code, text = run(["--dry-run", "--replay", str(_resampled(recording, tmp_path, 48000)), "--max-time", "8"])
+    assert code == 0, text
+    heard = next(line for line in text.splitlines() if " heard " in line)
+    assert float(heard.split("az ")[1].split(" deg")[0]) == pytest.approx(60, abs=5)
+    code, text = run(["--dry-run", "--replay", str(_resampled(recording, tmp_path, 8000)), "--max-time", "8"])
+    err = capsys.readouterr().err
+    assert code == 2 and "rescue on" not in text
+    assert "sample rate 8000 Hz is too low" in err and "12000 Hz" in err
+
+
+def test_json_lines_alone_on_stdout(recording, capsys):
+    """--json: stdout holds JSON lines only; the banner and the end of the mission go to stderr."""
+    code, text = run(["--dry-run", "--replay", str(recording), "--json", "--max-time", "4"])
+    assert code == 0
+    lines = text.splitlines()
+    assert lines and all(json.loads(line)["decision"] for line in lines)
+    err = capsys.readouterr().err
+    assert "ssl-robot: rescue on" in err
+
+
+def test_a_recorded_mission_replays_to_the_same_decisions(recording, tmp_path):
+    """--record DIR on a replayed mission (ideal dry-run drive); --replay DIR then feeds the behaviour the same
+    audio, drive readings and times: the same decisions, the same sources heard in the same directions. The
+    audio written is the audio the behaviour read (the recording's first seconds, sample for sample)."""
+    mission = tmp_path / "mission"
+    code, first = run(["--dry-run", "--replay", str(recording), "--json", "--max-time", "20", "--record", str(mission)])
+    assert code == 0
+    code, again = run(["--dry-run", "--replay", str(mission), "--json", "--max-time", "20"])
+    assert code == 0
+    a, b = [json.loads(x) for x in first.splitlines()], [json.loads(x) for x in again.splitlines()]
+    assert sum(e["decision"] == "heard" for e in a) >= 2
+    assert a == b
+    meta = json.loads((mission / "mission.json").read_text())
+    assert meta["sample_rate"] == FS and meta["n_channels"] == 8 and meta["sample_format"] == "int16"
+    fs, original = wavfile.read(recording)
+    fs2, written = wavfile.read(mission / "audio.wav")
+    assert fs2 == fs and written.shape[1] == 8 and 0 < len(written) <= len(original)
+    assert np.array_equal(written, original[:len(written)])   # listens read the file from its start, in order
+    # a second mission cannot overwrite the first
+    code, _ = run(["--dry-run", "--replay", str(recording), "--max-time", "2", "--record", str(mission)])
+    assert code == 2
+
+
+def test_a_replay_with_other_options_stops_at_the_first_difference(recording, tmp_path, capsys):
+    mission = tmp_path / "mission"
+    assert run(["--dry-run", "--replay", str(recording), "--max-time", "10", "--record", str(mission)])[0] == 0
+    code, _ = run(["--dry-run", "--replay", str(mission), "--max-time", "10", "--set", "listen_s=0.5"])
+    err = capsys.readouterr().err
+    assert code == 1 and "MissionDiverged" in err and "the behaviour read 8000 samples" in err

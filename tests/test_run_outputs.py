@@ -201,3 +201,38 @@ def test_ctrl_c_ends_a_run_with_a_stalled_viewer(tmp_path):
         assert p.returncode == 130, f"SIGINT {r['at']}: exit {p.returncode}\n{err}"
         assert err.strip().splitlines()[-1] == "ssl-rescue: interrupted" and "Traceback" not in err, err
         assert list(out.iterdir()) == [], "an interrupted run leaves no results.json, partial or stray file"
+
+
+_ABANDON_SCRIPT = r"""
+import sys, time
+import numpy as np
+from ssl_sim.viz import RerunLogger
+lg = RerunLogger(f"connect:127.0.0.1:{sys.argv[1]}")
+rng = np.random.default_rng(0)
+for _ in range(300):  # megabytes the stalled peer never reads: the flush cannot finish
+    lg.rec.log("x", lg.rr.Points3D(rng.random((2000, 3))))
+lg.close()
+print("closed", file=sys.stderr, flush=True)
+time.sleep(float(sys.argv[2]))
+print("last line", file=sys.stderr, flush=True)
+"""
+
+
+@pytest.mark.slow
+def test_an_abandoned_viewer_prints_nothing_after_close(tmp_path):
+    """Once close() gave up on a viewer that stopped answering (and said so), nothing more reaches stderr: rerun's
+    gRPC client, still flushing in the background, warns 10 s after the flush began - after the program's last
+    line ("interrupted") when the process takes that long to end under load. Here the process waits out those
+    10 s itself (close() takes the 3 s flush timeout + 5 s disconnect grace + 1 s)."""
+    peer = _Peer(settings=True)
+    env = {k: v for k, v in os.environ.items() if k != "RUST_LOG"}
+    env["PYTHONPATH"] = str(SRC)
+    try:
+        p = subprocess.run([sys.executable, "-c", _ABANDON_SCRIPT, str(peer.port), "4"], env=env,
+                           capture_output=True, text=True, timeout=120)
+    finally:
+        peer.close()
+    lines = p.stderr.strip().splitlines()
+    assert p.returncode == 0, p.stderr
+    assert "did not take the end of the recording" in p.stderr, p.stderr  # our own warning, before close returns
+    assert lines[-2:] == ["closed", "last line"], p.stderr

@@ -142,3 +142,12 @@ def test_faint_silent_listens_do_not_make_a_caller_an_interferer():
     assert m2.sources[0].cls is SourceClass.UNKNOWN
     with pytest.raises(ValueError, match="silent_faint_db"):
         SoundMapConfig(silent_faint_db=-40.0)
+
+
+def test_sources_are_numbered_from_one_like_the_victims_found():
+    """The behaviour prints "victim #1 (source #1)": map sources and victims found share one convention."""
+    m = SoundMap()
+    for k, p in enumerate(([2.0, 0.0, 0.2], [0.0, 2.5, 0.2])):
+        d = np.array(p) - [0, 0, H]
+        m.update([Ev(k, d / np.linalg.norm(d), 0.0, 0.9)], (0.0, 0.0, 0.0), 0.0)
+    assert sorted(s.id for s in m.sources) == [1, 2]

@@ -110,5 +110,5 @@ def test_track_and_odas_formats(tmp_path, capsys):
     assert main([str(path), "--track"]) == 0
     assert "activity" in capsys.readouterr().out
     assert main([str(path), "--track", "--json"]) == 0
-    tracks = json.loads(capsys.readouterr().out)["windows"][-1]["tracks"]
+    tracks = [json.loads(s) for s in capsys.readouterr().out.splitlines()][-1]["tracks"]  # one line per window
     assert tracks[0]["id"] == 1 and abs(tracks[0]["azimuth_deg"] - 60.0) <= 5.0

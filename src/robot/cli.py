@@ -3,32 +3,39 @@
 Real robot:    ssl-robot --serial /dev/ttyUSB0 --audio 2,3 [--channel-map A0,A1,A2,A3,B0,B1,B2,B3]
 Mics only:     ssl-robot --dry-run --audio 2,3            (live audio, motors untouched)
 Replay:        ssl-robot --dry-run --replay REC.wav       (8-channel WAV, simulated ideal drive)
+Record:        ssl-robot ... --record DIR                 (the mission's audio, drive and clock, for --replay DIR)
+Replay a mission: ssl-robot --dry-run --replay DIR        (the same audio, drive readings and times)
 Devices:       ssl-robot --list-audio
 
-Every decision is printed as it is taken (``--json``: one JSON object per line).
-Ctrl-C stops the robot.
+Every decision is printed as it is taken (``--json``: one JSON object per line on stdout, every other message
+on stderr). A WAV at another rate than the behaviour's 16 kHz is resampled as it is read (at least 12 kHz:
+the localizer's band reaches 6 kHz). Ctrl-C stops the robot.
 """
 from __future__ import annotations
 
 import argparse
+import importlib
 import json
 import logging
 import math
 import sys
+from typing import TYPE_CHECKING
 
-from robot.config_values import field_values
-from robot.coverage import CoverageConfig
 from robot.hal import Clock, ManualClock, WallClock
 from robot.interrupt import check_interrupt, deferred_sigint
-from robot.motion import MotionConfig
-from robot.occupancy import OccupancyConfig
-from robot.odometry import GyroFusionConfig, TravelConfig
-from robot.planner import PlannerConfig
-from robot.rescue import RescueBehaviour, RescueConfig, RescueEvent
-from robot.sound_map import SoundMapConfig
+from ssl_core.broken_pipe import quiet_on_broken_pipe
+
+# The behaviour's modules import scipy.signal (seconds): they are imported once the arguments are parsed, so that
+# --help and usage errors answer at once.
+if TYPE_CHECKING:
+    from robot.rescue import RescueEvent
 from ssl_core.version import version
 
 PROG = "ssl-robot"
+#: Rate the behaviour hears at (robot.vad.SAMPLE_RATE); a replayed WAV at another rate is resampled to it.
+BEHAVIOUR_RATE_HZ = 16000
+#: Lowest WAV rate replayed: the localizer's analysis band reaches 6 kHz (as ssl-locate requires).
+MIN_REPLAY_RATE_HZ = 12000
 
 
 def _parser() -> argparse.ArgumentParser:
@@ -40,7 +47,11 @@ def _parser() -> argparse.ArgumentParser:
     audio = p.add_mutually_exclusive_group()
     audio.add_argument("--audio", metavar="DEV_A,DEV_B",
                        help="the two 4-channel USB microphone devices (index or unique name part; see --list-audio)")
-    audio.add_argument("--replay", metavar="REC.wav", help="multichannel recording instead of live audio")
+    audio.add_argument("--replay", metavar="REC.wav|DIR",
+                       help="multichannel recording instead of live audio, or a mission recorded with --record")
+    p.add_argument("--record", metavar="DIR", default=None,
+                   help="record the mission for --replay DIR: its audio (DIR/audio.wav), drive and clock "
+                        "(DIR/hal.jsonl), options (DIR/mission.json)")
     p.add_argument("--list-audio", action="store_true", help="list audio input devices and exit")
     p.add_argument("--channel-map", default="A0,A1,A2,A3,B0,B1,B2,B3",
                    help="device channel of each array mic in order, A/B = first/second device (default: %(default)s)")
@@ -68,13 +79,23 @@ def _parser() -> argparse.ArgumentParser:
 # ``--set SECTION.FIELD=VALUE`` reaches these configs of the behaviour (a plain FIELD: ``RescueConfig``); e.g. the
 # odometry's loaded-wheel threshold must be measured on the robot's open-loop drive (``TravelConfig``), and the
 # area to search is the room's floor relative to the start pose (``--set coverage.area=-1,-3,6,3``).
-_SECTIONS = {"motion": MotionConfig, "sound_map": SoundMapConfig, "planner": PlannerConfig,
-             "occupancy": OccupancyConfig, "gyro": GyroFusionConfig, "travel": TravelConfig,
-             "coverage": CoverageConfig}
+_SECTIONS = {"motion": "robot.motion:MotionConfig", "sound_map": "robot.sound_map:SoundMapConfig",
+             "planner": "robot.planner:PlannerConfig", "occupancy": "robot.occupancy:OccupancyConfig",
+             "gyro": "robot.odometry:GyroFusionConfig", "travel": "robot.odometry:TravelConfig",
+             "coverage": "robot.coverage:CoverageConfig"}
+
+
+def section_config(section: str) -> type:
+    """The config class behind ``--set SECTION.FIELD=VALUE`` (imported when first needed)."""
+    module, _, name = _SECTIONS[section].partition(":")
+    return getattr(importlib.import_module(module), name)
 
 
 def _rescue_config(args) -> tuple[RescueConfig, dict]:
     """``--set`` values -> (``RescueConfig``, keyword configs of ``RescueBehaviour`` by section)."""
+    from robot.config_values import field_values
+    from robot.rescue import RescueConfig
+
     values: dict[str, dict[str, str]] = {}
     for item in args.set:
         name, sep, text = item.partition("=")
@@ -87,7 +108,7 @@ def _rescue_config(args) -> tuple[RescueConfig, dict]:
     try:
         changes = field_values(RescueConfig, values.pop("", {}), "--set", text=True, sep=" ")
         config = RescueConfig(**{"max_victims": args.max_victims, **changes})
-        sections = {sec: _SECTIONS[sec](**field_values(_SECTIONS[sec], vals, f"--set {sec}", text=True))
+        sections = {sec: section_config(sec)(**field_values(section_config(sec), vals, f"--set {sec}", text=True))
                     for sec, vals in values.items()}
         return config, sections
     except (ValueError, TypeError) as exc:
@@ -125,7 +146,8 @@ def _open_drive(args, clock: Clock):
 def _open_audio(args, clock: Clock, geometry, out):
     if args.replay:
         from robot.replay import WavFileSource
-        return WavFileSource(args.replay, expected_channels=geometry.n_mics, clock=clock)
+        return WavFileSource(args.replay, expected_channels=geometry.n_mics, clock=clock,
+                             resample_to=BEHAVIOUR_RATE_HZ, min_rate=MIN_REPLAY_RATE_HZ)
     from robot.hardware.audio import ArrayCapture, MergeConfig, parse_channel_map
     devices = [d.strip() for d in args.audio.split(",")]
     if len(devices) != 2 or not all(devices):
@@ -210,9 +232,12 @@ def _jsonable(o):
         return str(o)
 
 
+@quiet_on_broken_pipe
 def main(argv: list[str] | None = None, out=None) -> int:
     out = out or sys.stdout
     args = _parser().parse_args(argv)
+    # with --json, stdout carries the JSON lines alone: every other message goes to stderr
+    say = sys.stderr if args.json else out
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
                         format="%(levelname)s %(name)s: %(message)s")
 
@@ -236,7 +261,12 @@ def main(argv: list[str] | None = None, out=None) -> int:
         return fail("--replay moves nothing real: use it with --dry-run")
     if args.realtime and not args.replay:
         return fail("--realtime only applies to --replay")
+    from robot.mission_log import MissionReplay, MissionRecorder, is_mission
+    mission = bool(args.replay) and is_mission(args.replay)
+    if mission and args.realtime:
+        return fail("--realtime: a recorded mission replays with its own times")
 
+    from robot.rescue import RescueBehaviour
     from ssl_core.geometry import get_array
     from ssl_core.localizer import Localizer, LocalizerConfig
 
@@ -245,26 +275,36 @@ def main(argv: list[str] | None = None, out=None) -> int:
         config, sections = _rescue_config(args)
     except ValueError as exc:
         return fail(str(exc))
-    drive = audio = None
+    drive = audio = recorder = None
     try:
         geometry = get_array(args.array)
-        clock: Clock = ManualClock() if args.replay and not args.realtime else _MissionClock()
-        drive = _open_drive(args, clock)
-        audio = _open_audio(args, clock, geometry, out)
+        if mission:
+            replay = MissionReplay(args.replay, expected_channels=geometry.n_mics)
+            clock, drive, audio = replay.clock(), replay.drive(), replay.audio()
+        else:
+            clock = ManualClock() if args.replay and not args.realtime else _MissionClock()
+            drive = _open_drive(args, clock)
+            audio = _open_audio(args, clock, geometry, say)
+        if args.record:
+            recorder = MissionRecorder(args.record, meta={"array": geometry.name, "argv": list(
+                sys.argv[1:] if argv is None else argv)})
+            clock, drive, audio = recorder.clock(clock), recorder.drive(drive), recorder.audio(audio)
         localizer = Localizer(geometry, LocalizerConfig(fs=audio.sample_rate, n_sources=args.sources,
                                                         rel_threshold=args.rel_threshold))
         audio = _monitored(args, audio, geometry, localizer, out)
     except (ValueError, FileNotFoundError, ImportError, OSError, RuntimeError) as exc:
-        for dev in (drive, audio):
+        for dev in (drive, audio, recorder):
             if dev is not None:
                 dev.close()
         return fail(str(exc))
 
     src = args.replay or f"audio devices {args.audio}"
     drv = "dry run (no motors)" if args.dry_run else f"drive on {args.serial}"
-    print(f"{PROG}: rescue on {src}, {drv}, array {geometry.name}, up to {args.max_time:g} s", file=out, flush=True)
+    print(f"{PROG}: rescue on {src}, {drv}, array {geometry.name}, up to {args.max_time:g} s"
+          + (f", recording to {args.record}" if args.record else ""), file=say, flush=True)
     behaviour = RescueBehaviour(audio, drive, clock, localizer, config, **sections)
     code = 0
+    reader_gone = False
     try:
         with deferred_sigint():
             t_end = clock.now() + args.max_time
@@ -273,19 +313,28 @@ def main(argv: list[str] | None = None, out=None) -> int:
                     _print_event(e, args.json, out)
                 check_interrupt()
         if not behaviour.done:
-            print(f"{PROG}: mission time of {args.max_time:g} s used up", file=out)
+            print(f"{PROG}: mission time of {args.max_time:g} s used up", file=say)
     except KeyboardInterrupt:
-        print(f"{PROG}: interrupted, {_stop(drive)}", file=out)
+        print(f"{PROG}: interrupted, {_stop(drive)}", file=say)
         code = 130
+    except BrokenPipeError:  # the reader of stdout went away: stop the robot, then end quietly
+        _stop(drive)
+        reader_gone = True
     except Exception as exc:
         print(f"{PROG}: error: {type(exc).__name__}: {exc} ({_stop(drive)})", file=sys.stderr)
         code = 1
     finally:
-        for dev in (drive, audio):
+        for dev in (drive, audio, recorder):
             try:
-                dev.close()
+                if dev is not None:
+                    dev.close()
             except Exception as exc:
                 print(f"{PROG}: closing {type(dev).__name__} failed: {exc}", file=sys.stderr)
+    if reader_gone:
+        raise BrokenPipeError
+    if args.record:
+        print(f"{PROG}: mission recorded in {args.record} (replay: {PROG} --dry-run --replay {args.record})",
+              file=say)
     if not args.json:
         print(f"{PROG}: {len(behaviour.victims)} victim(s) found", file=out)
         for i, v in enumerate(behaviour.victims, 1):

@@ -9,6 +9,7 @@ from __future__ import annotations
 import logging
 import math
 from dataclasses import dataclass
+from math import gcd
 from pathlib import Path
 
 import numpy as np
@@ -38,7 +39,12 @@ class WavFileSource(AudioSource):
 
     ``expected_channels`` / ``expected_rate``: what the caller's array and
     localizer need (e.g. 8 and 16000); a mismatch raises ``ValueError`` at
-    open time. Block timestamps are file time, ``start_time + index / fs``
+    open time. ``resample_to``: instead, deliver the file at this rate
+    (Hz; ``scipy.signal.resample_poly``'s polyphase filter applied block by
+    block on the memory-mapped file, with enough of the neighbouring samples
+    that every block equals the same span of the whole file resampled at
+    once); the rate of the file must then be at least ``min_rate``.
+    Block timestamps are file time, ``start_time + index / fs``
     (s). With a ``clock``, every read lets ``n_samples / fs`` pass on it, as a
     live capture would (a ``WallClock`` then replays in real time, a
     ``ManualClock`` as fast as possible with consistent times).
@@ -51,6 +57,8 @@ class WavFileSource(AudioSource):
         expected_rate: int | None = None,
         clock: Clock | None = None,
         start_time: float = 0.0,
+        resample_to: int | None = None,
+        min_rate: int = 0,
     ) -> None:
         self.path = Path(path)
         if not self.path.is_file():
@@ -74,9 +82,19 @@ class WavFileSource(AudioSource):
                 f"replay recording {self.path}: sample rate is {rate} Hz, expected {expected_rate} Hz "
                 "(resample it first, e.g. `sox in.wav -r 16000 out.wav`)"
             )
+        if int(rate) < min_rate:
+            raise ValueError(
+                f"replay recording {self.path}: sample rate {rate} Hz is too low, at least {min_rate} Hz is needed "
+                "(the localizer's analysis band reaches 6000 Hz)"
+            )
         _to_block_dtype(data[:1])  # fail now on unsupported sample types
         self._data = data
-        self._rate = int(rate)
+        self._file_rate = int(rate)
+        self._rate = int(resample_to) if resample_to else int(rate)
+        g = gcd(self._rate, self._file_rate)
+        self._up, self._down = self._rate // g, self._file_rate // g
+        # resample_poly's default filter: 10 zero crossings on each side of the slower rate, in input samples
+        self._margin = 10 * max(self._up, self._down) // self._up + self._down + 2
         self._pos = 0
         self._clock = clock
         self.start_time = float(start_time)
@@ -90,9 +108,14 @@ class WavFileSource(AudioSource):
         return int(self._data.shape[1])
 
     @property
+    def file_rate(self) -> int:
+        """Sample rate of the file (Hz); :attr:`sample_rate` is the rate delivered."""
+        return self._file_rate
+
+    @property
     def n_samples(self) -> int:
-        """Samples per channel in the whole file."""
-        return int(self._data.shape[0])
+        """Samples per channel in the whole recording, at the rate delivered."""
+        return -(-int(self._data.shape[0]) * self._up // self._down)
 
     @property
     def duration(self) -> float:
@@ -120,7 +143,7 @@ class WavFileSource(AudioSource):
             self._pos = self.n_samples
             raise EOFError(f"replay recording {self.path}: end reached ({left} samples left, {n} requested)")
         block = AudioBlock(
-            samples=_to_block_dtype(self._data[self._pos:self._pos + n].T),
+            samples=self._samples(self._pos, n),
             sample_rate=self._rate,
             timestamp=self.start_time + self._pos / self._rate,
         )
@@ -128,6 +151,25 @@ class WavFileSource(AudioSource):
         if self._clock is not None:
             self._clock.sleep(n / self._rate)
         return block
+
+    def _samples(self, pos: int, n: int) -> np.ndarray:
+        """Samples ``pos .. pos + n`` (at the delivered rate), (channels, n)."""
+        if self._up == self._down:
+            return _to_block_dtype(self._data[pos:pos + n].T)
+        from scipy.signal import resample_poly
+
+        up, down, total = self._up, self._down, int(self._data.shape[0])
+        # input span: starts on a multiple of `down` (so output k of the span is output start * up / down + k
+        # of the whole file) a margin before the first input sample needed, ends a margin after the last one
+        start = max(0, (pos * down // up - self._margin) // down * down)
+        stop = min(total, -(-(pos + n) * down // up) + self._margin)
+        x = _to_block_dtype(self._data[start:stop].T)
+        y = resample_poly(np.asarray(x, np.float64), up, down, axis=1)
+        k = pos - start * up // down
+        out = y[:, k:k + n]
+        if x.dtype == np.int16:
+            return np.clip(np.round(out), -32768, 32767).astype(np.int16)
+        return out
 
     def close(self) -> None:
         self._data = self._data[:0]  # drop the memory map

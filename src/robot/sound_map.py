@@ -394,7 +394,7 @@ class SoundMap:
     def __init__(self, config: SoundMapConfig = SoundMapConfig()) -> None:
         self.config = config
         self._sources: list[_Source] = []
-        self._next_id = 0
+        self._next_id = 1  # numbered from 1, as the victims found are, in everything the behaviour prints
         self._track_to_source: dict[int, int] = {}
         self._merged_into: dict[int, int] = {}  # merged source id -> the id that absorbed it
         self._rng = np.random.default_rng(config.seed)

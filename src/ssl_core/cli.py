@@ -10,6 +10,13 @@ Exit codes: 0 done (also when no source was found: stderr says so); 1 no source 
 ``--require-source`` given; 2 bad input (file missing, a directory, unreadable, not a WAV, wrong
 channel count, bad ``--array`` or option values; one line on stderr naming the file or option).
 
+``--truth REC.json`` scores the per-window detections (or, with ``--track``, the confirmed tracks) against the
+truth JSON ``ssl-rescue record`` writes beside its WAV: per source its direction error and detection rate, and
+the false-alarm rate (definitions in ``ssl_core.scoring``); prints a table, or one JSON object with ``--json``.
+
+``--stream --json`` / ``--track --json`` print one JSON object per analysis window and line, as the windows
+come: ``{"time_s": t, "detections": [...]}`` / ``{"time_s": t, "tracks": [...]}``.
+
 ``--format odas`` writes one JSON object per line in the shape of ODAS's sinks (introlab/odas
 ``snk_pots``/``snk_tracks``): ``{"timeStamp": k, "src": [...]}`` with ``k`` the window index
 (ODAS counts hops). Without ``--track`` (SSL shape) each entry is ``{"x", "y", "z", "E"}``: the
@@ -24,14 +31,20 @@ import json
 import re
 import sys
 from dataclasses import replace
+from typing import TYPE_CHECKING
 
-from ssl_core.detection import Detection
-from ssl_core.geometry import get_array
-from ssl_core.localizer import Localizer, LocalizerConfig
-from ssl_core.tracking import TRACKING_MIN_SIGNIFICANCE, Track, Tracker
+from ssl_core.broken_pipe import quiet_on_broken_pipe
 from ssl_core.version import version
-from ssl_core.wav_blocks import read_blocks, wav_info
 
+# The localizer's modules import scipy.signal (seconds): they are imported once the arguments are parsed, so that
+# --help and usage errors answer at once.
+if TYPE_CHECKING:
+    from ssl_core.detection import Detection
+    from ssl_core.localizer import Localizer
+    from ssl_core.tracking import Track
+
+#: Analysis band (Hz) when ``--band`` is not given.
+DEFAULT_BAND_HZ = (300.0, 6000.0)
 EXIT_OK, EXIT_NO_SOURCE, EXIT_BAD_INPUT = 0, 1, 2
 _BLOCK_S = 1.0  # seconds read per block: bounded memory, few Python round trips
 
@@ -48,8 +61,9 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--array", default="cube8", help="array preset (cube8, cube8_corners) or .toml/.json geometry")
     p.add_argument("--sources", type=int, default=1, help="maximum number of sources to report (>= 1)")
     p.add_argument("--resolution", type=float, default=1.5, help="final grid resolution (degrees)")
-    p.add_argument("--band", type=float, nargs=2, default=(300.0, 6000.0), metavar=("LOW", "HIGH"),
-                   help="analysis band (Hz)")
+    p.add_argument("--band", type=float, nargs=2, default=None, metavar=("LOW", "HIGH"),
+                   help="analysis band (Hz) (default: %g %g; the file's sample rate must be at least twice HIGH)"
+                        % DEFAULT_BAND_HZ)
     p.add_argument("--radius", type=float, default=None, help="near-field grid radius (m); far field if omitted")
     p.add_argument("--min-separation", type=float, default=20.0, help="minimum angle between sources (degrees)")
     p.add_argument("--noise-suppression", action="store_true",
@@ -60,10 +74,18 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--format", choices=("table", "json", "odas"), default="table", help="output format")
     p.add_argument("--json", action="store_true", help="same as --format json")
     p.add_argument("--require-source", action="store_true", help="exit with code 1 when no source is found")
+    p.add_argument("--truth", metavar="REC.json", default=None,
+                   help="score the detections per window against this truth (the JSON `ssl-rescue record` writes): "
+                        "per-source error and detection rate, false-alarm rate")
+    p.add_argument("--truth-tolerance", type=float, default=20.0, metavar="DEG",
+                   help="with --truth: a detection within this angle of a sounding source is a hit of it "
+                        "(default: %(default)s)")
     return p
 
 
 def _open(path: str):
+    from ssl_core.wav_blocks import wav_info
+
     try:
         return wav_info(path)
     except FileNotFoundError:
@@ -79,6 +101,16 @@ def _open(path: str):
 
 
 def _localizer(args, fs: int) -> Localizer:
+    from ssl_core.geometry import get_array
+    from ssl_core.localizer import Localizer, LocalizerConfig
+    from ssl_core.tracking import TRACKING_MIN_SIGNIFICANCE
+
+    if args.band is None and fs < 2 * DEFAULT_BAND_HZ[1]:
+        raise _BadInput(f"{args.wav}: sample rate {fs} Hz is too low for the default analysis band "
+                        f"{DEFAULT_BAND_HZ[0]:g}-{DEFAULT_BAND_HZ[1]:g} Hz (it needs at least "
+                        f"{2 * DEFAULT_BAND_HZ[1]:g} Hz): record or resample at 16000 Hz, or give a band below "
+                        f"{fs / 2:g} Hz with --band LOW HIGH")
+    band = tuple(args.band) if args.band is not None else DEFAULT_BAND_HZ
     if args.sources < 1:
         raise _BadInput(f"--sources {args.sources}: expected an integer >= 1")
     try:
@@ -89,13 +121,16 @@ def _localizer(args, fs: int) -> Localizer:
     try:
         cfg = replace(LocalizerConfig(), fs=fs, n_sources=args.sources, resolution_deg=args.resolution,
                       coarse_resolution_deg=max(args.resolution, min(4.0, args.min_separation / 2)),
-                      band_hz=tuple(args.band), radius_m=args.radius, noise_suppression=args.noise_suppression,
+                      band_hz=band, radius_m=args.radius, noise_suppression=args.noise_suppression,
                       min_separation_deg=args.min_separation, window_frames=args.window)
         if args.track:  # the tracker's confirmation is the false-alarm control: the looser gate it is tuned for
             cfg = replace(cfg, min_significance=TRACKING_MIN_SIGNIFICANCE)
         return Localizer(geometry, cfg)
     except ValueError as exc:
-        raise _BadInput(_with_option(args, str(exc)))
+        message = _with_option(args, str(exc))
+        if message.startswith("--band") and "fs/2" in message:
+            message = f"{message} (the file {args.wav} is sampled at {fs} Hz)"
+        raise _BadInput(message)
 
 
 # The option that sets each LocalizerConfig field an error can name.
@@ -119,6 +154,8 @@ def _shown(value) -> str:
 
 
 def _blocks(info, loc: Localizer):
+    from ssl_core.wav_blocks import read_blocks
+
     if info.channels != loc.geometry.n_mics:
         raise _BadInput(f"{info.path}: {info.channels} channels, array '{loc.geometry.name}' expects "
                         f"{loc.geometry.n_mics}")
@@ -130,9 +167,17 @@ def _blocks(info, loc: Localizer):
 
 def _run(args) -> int:
     fmt = "json" if args.json else args.format
+    if args.truth is not None and fmt == "odas":
+        raise _BadInput("--truth prints scores: use it with the table or --json, not --format odas")
     info = _open(args.wav)
+    truth, truth_array = _truth(args, info) if args.truth is not None else (None, None)
     loc = _localizer(args, info.fs)
     blocks = _blocks(info, loc)
+    if truth is not None:
+        if truth_array is not None and truth_array != loc.geometry.name:
+            raise _BadInput(f"--truth {args.truth}: directions are in the frame of array '{truth_array}', "
+                            f"--array {args.array} is '{loc.geometry.name}'")
+        return _score(args, fmt, info, loc, blocks, truth)
     try:
         found = (_per_window if args.stream or args.track else _whole)(args, fmt, info, loc, blocks)
     except ValueError as exc:  # bad samples found while reading (NaN in a float WAV)
@@ -141,6 +186,73 @@ def _run(args) -> int:
         print(f"ssl-locate: {args.wav}: no source detected (no peak passed the significance test)", file=sys.stderr)
         return EXIT_NO_SOURCE if args.require_source else EXIT_OK
     return EXIT_OK
+
+
+def _truth(args, info):
+    """The ``--truth`` file as a ``ssl_core.scoring.Scorer`` and the array its directions refer to (None: not
+    said); bad input names the file and the field."""
+    from ssl_core.scoring import Scorer, Truth
+
+    path = args.truth
+    try:
+        with open(path, encoding="utf-8") as f:
+            data = json.load(f)
+    except FileNotFoundError:
+        raise _BadInput(f"--truth {path}: no such file")
+    except IsADirectoryError:
+        raise _BadInput(f"--truth {path}: is a directory, expected the truth JSON of a recording")
+    except OSError as exc:
+        raise _BadInput(f"--truth {path}: cannot read: {exc.strerror or exc}")
+    except (json.JSONDecodeError, UnicodeDecodeError) as exc:
+        raise _BadInput(f"--truth {path}: not a JSON file ({exc})")
+    try:
+        truth = Truth.from_dict(data, where=f"--truth {path}")
+        scorer = Scorer(truth, args.truth_tolerance)
+    except ValueError as exc:
+        msg = str(exc)
+        raise _BadInput(msg if msg.startswith("--truth") else f"--truth-tolerance {args.truth_tolerance:g}: {msg}")
+    if isinstance(data.get("fs"), int) and data["fs"] != info.fs:
+        raise _BadInput(f"--truth {path}: is the truth of a recording at {data['fs']} Hz, {args.wav} is at "
+                        f"{info.fs} Hz")
+    return scorer, (data.get("array") if isinstance(data.get("array"), str) else None)
+
+
+def _score(args, fmt: str, info, loc: Localizer, blocks, scorer) -> int:
+    """Every window's detections (``--track``: confirmed tracks) scored against the truth; prints the scores."""
+    import numpy as np
+
+    from ssl_core.tracking import Tracker
+
+    tracker = Tracker() if args.track else None
+    cfg = loc.config
+    half_window_s = ((cfg.window_frames - 1) * cfg.hop + cfg.frame_size) / (2.0 * info.fs)
+    try:
+        for block in blocks:
+            for r in loc.process(block):
+                items = tracker.update(r.detections, r.time) if tracker is not None else r.detections
+                dirs = np.array([it.direction for it in items], float).reshape(-1, 3)
+                scorer.add(r.time - half_window_s, dirs)
+    except ValueError as exc:
+        raise _BadInput(f"{info.path}: {exc}")
+    result = scorer.to_dict()
+    if fmt == "json":
+        print(json.dumps({"file": args.wav, "truth": args.truth, "fs": info.fs, "array": loc.geometry.name,
+                          "scored": "tracks" if tracker is not None else "detections", **result}))
+        return EXIT_OK
+    what = "confirmed tracks" if tracker is not None else "detections"
+    print(f"{args.wav} against {args.truth}: {result['windows']} windows, {result['detections']} {what}, "
+          f"hit = within {result['tolerance_deg']:g} deg of a sounding source")
+    print(f"{'source':<16} {'sounding':>8} {'hits':>6} {'det_rate':>8} {'err_med_deg':>11} {'err_p90_deg':>11}")
+    for s in result["sources"]:
+        print(f"{s['name']:<16} {s['windows_sounding']:8d} {s['hits']:6d} {_cell(s['detection_rate'], 3):>8} "
+              f"{_cell(s['error_median_deg'], 1):>11} {_cell(s['error_p90_deg'], 1):>11}")
+    print(f"false alarms: {result['false_alarms']} of {result['detections']} {what} "
+          f"(rate {_cell(result['false_alarm_rate'], 3)}, {_cell(result['false_alarms_per_window'], 3)} per window)")
+    return EXIT_OK
+
+
+def _cell(v, nd: int) -> str:
+    return "-" if v is None else f"{v:.{nd}f}"
 
 
 def _whole(args, fmt: str, info, loc: Localizer, blocks) -> bool:
@@ -159,9 +271,11 @@ def _whole(args, fmt: str, info, loc: Localizer, blocks) -> bool:
 
 def _per_window(args, fmt: str, info, loc: Localizer, blocks) -> bool:
     """Detections (``--stream``) or confirmed tracks (``--track``) after every window, printed as they come
-    (JSON: collected into one object at the end); returns whether any window had one."""
+    (JSON: one object per window and line); returns whether any window had one."""
+    from ssl_core.tracking import Tracker
+
     tracker = Tracker() if args.track else None
-    windows, found, k = [], False, 0
+    found, k = False, 0
     if fmt == "table":
         _table_header(args, info, loc, tracks=tracker is not None)
     for block in blocks:
@@ -170,21 +284,24 @@ def _per_window(args, fmt: str, info, loc: Localizer, blocks) -> bool:
             found = found or bool(items)
             if tracker is not None:
                 if fmt == "json":
-                    windows.append({"time_s": round(r.time, 4), "tracks": [_track_dict(t) for t in items]})
+                    _json_line({"time_s": round(r.time, 4), "tracks": [_track_dict(t) for t in items]})
                 elif fmt == "odas":
-                    print(json.dumps({"timeStamp": k, "src": [_odas_track(t) for t in items]}))
+                    _json_line({"timeStamp": k, "src": [_odas_track(t) for t in items]})
                 else:
                     _track_rows(r.time, items)
             elif fmt == "json":
-                windows.append({"time_s": round(r.time, 4), "detections": [d.to_dict() for d in items]})
+                _json_line({"time_s": round(r.time, 4), "detections": [d.to_dict() for d in items]})
             elif fmt == "odas":
-                print(json.dumps({"timeStamp": k, "src": [_odas_pot(d) for d in items]}))
+                _json_line({"timeStamp": k, "src": [_odas_pot(d) for d in items]})
             else:
                 _table_rows(r.time, items)
             k += 1
-    if fmt == "json":
-        print(json.dumps({"file": args.wav, "fs": info.fs, "array": loc.geometry.name, "windows": windows}))
     return found
+
+
+def _json_line(obj: dict) -> None:
+    """One JSON line, flushed: a reader of the pipe gets each window when it is done."""
+    print(json.dumps(obj), flush=True)
 
 
 def _odas_pot(d: Detection) -> dict:
@@ -216,7 +333,7 @@ def _table_header(args, info, loc, tracks: bool = False) -> None:
 
 def _table_rows(time: float, detections) -> None:
     if not detections:
-        print(f"{time:8.3f}  -  (no source)")
+        print(f"{time:8.3f}  -  (no source)", flush=True)
     for k, d in enumerate(detections):
         print(f"{time:8.3f} {k + 1:2d} {d.azimuth_deg:12.1f} {d.elevation_deg:14.1f} {d.power:7.3f} "
               f"{d.significance:7.1f} {d.level_db:9.1f}")
@@ -224,12 +341,13 @@ def _table_rows(time: float, detections) -> None:
 
 def _track_rows(time: float, tracks) -> None:
     if not tracks:
-        print(f"{time:8.3f}    -  (no track)")
+        print(f"{time:8.3f}    -  (no track)", flush=True)
     for t in tracks:
         print(f"{time:8.3f} {t.id:4d} {t.azimuth_deg:12.1f} {t.elevation_deg:14.1f} {t.activity:9.2f} "
               f"{t.level_db:9.1f}")
 
 
+@quiet_on_broken_pipe
 def main(argv: list[str] | None = None) -> int:
     args = _parser().parse_args(argv)  # argparse exits with 2 on a usage error, as documented
     try:

@@ -16,6 +16,7 @@ import sys
 from pathlib import Path
 
 from robot.interrupt import deferred_sigint
+from ssl_core.broken_pipe import quiet_on_broken_pipe
 from ssl_core.version import version
 
 # The scenario, runner and viewer modules are imported inside the commands: they take 1-2 s to import, and
@@ -38,8 +39,10 @@ def _run(args: argparse.Namespace) -> int:
             check_output_dir(Path(arg).parent, "--rerun save:")
     result = run_scenario(sc, seed=args.seed, time_limit_s=args.time_limit, rerun=args.rerun, out_dir=out,
                           progress=not args.quiet)
-    print(format_summary(result))
-    print(f"wrote {out / 'results.json'}" + (f" and {result['rerun_file']}" if result.get("rerun_file") else ""))
+    say = sys.stderr if args.json else sys.stdout  # with --json, stdout carries the JSON line alone
+    print(format_summary(result), file=say)
+    print(f"wrote {out / 'results.json'}" + (f" and {result['rerun_file']}" if result.get("rerun_file") else ""),
+          file=say)
     if args.json:
         print(json.dumps({k: result[k] for k in ("scenario", "seed", "n_found", "n_victims", "sim_time_s",
                                                   "path_length_m", "collisions", "spl")}))
@@ -92,9 +95,15 @@ def _list(args: argparse.Namespace) -> int:
     return 0
 
 
-def build_parser() -> argparse.ArgumentParser:
-    from ssl_sim.scenario import scenario_names
+def _shipped_scenarios() -> list[str]:
+    # the directory listing, not ssl_sim.scenario.scenario_names(): that module imports the simulator (seconds),
+    # and --help should answer at once
+    from ssl_sim.resources import SCENARIOS_DIR
 
+    return sorted(p.stem for p in SCENARIOS_DIR.glob("*.toml"))
+
+
+def build_parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="ssl-rescue", description=__doc__.split("\n\n")[0],
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
     p.add_argument("--version", action="version", version=f"%(prog)s {version()}")
@@ -102,13 +111,14 @@ def build_parser() -> argparse.ArgumentParser:
 
     r = sub.add_parser("run", help="run one scenario headlessly and write results.json")
     r.add_argument("scenario", nargs="?", default="paper_lab",
-                   help=f"a shipped scenario ({', '.join(scenario_names())}) or a .toml file (default paper_lab)")
+                   help=f"a shipped scenario ({', '.join(_shipped_scenarios())}) or a .toml file (default paper_lab)")
     r.add_argument("--seed", type=int, default=None, help="run seed (default: the scenario's)")
     r.add_argument("--time-limit", type=float, default=None, help="simulated seconds (default: the scenario's)")
     r.add_argument("--rerun", default=None, metavar="save:PATH|spawn|connect[:ADDR]",
                    help="log to rerun: an .rrd file (headless), a spawned viewer or a running one")
     r.add_argument("--out", default=None, help="output directory (default out/runs/NAME_seedN)")
-    r.add_argument("--json", action="store_true", help="also print a one-line JSON summary")
+    r.add_argument("--json", action="store_true",
+                   help="print a one-line JSON summary on stdout (the human-readable summary goes to stderr)")
     r.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     r.set_defaults(func=_run)
 
@@ -137,6 +147,7 @@ def build_parser() -> argparse.ArgumentParser:
     return p
 
 
+@quiet_on_broken_pipe
 def main(argv: list[str] | None = None) -> int:
     try:
         # Ctrl-C is raised at check points only, never inside an import (robot.interrupt): here at the end of

@@ -13,10 +13,12 @@ from __future__ import annotations
 import sys
 from pathlib import Path
 
+from ssl_core.broken_pipe import quiet_on_broken_pipe
 from ssl_sim.runner import format_summary, run_scenario
 from ssl_sim.scenario import DEFAULT_SCENARIO, load_scenario
 
 
+@quiet_on_broken_pipe
 def main(out_dir: str = "out/demo", scenario: str = DEFAULT_SCENARIO, seed: int | None = None) -> int:
     out = Path(out_dir)
     sc = load_scenario(scenario)

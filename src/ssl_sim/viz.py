@@ -55,6 +55,25 @@ log = logging.getLogger(__name__)
 VIEWER_TIMEOUT_S = 3.0
 DEFAULT_VIEWER_ADDR = ("127.0.0.1", 9876)  # rerun's default gRPC port
 _RERUN_DISCONNECT_GRACE_S = 5.0  # rerun 0.41 waits this long for a connection when a sink shuts down (measured)
+# rerun's gRPC client keeps flushing in a background thread after close() abandoned a stalled viewer and warns
+# "Flushing the gRPC stream has taken over 10.0s" from there, after our own last line (e.g. "interrupted").
+# close() reports the abandoned viewer itself, so that module logs errors only. rerun reads RUST_LOG once, when
+# it is imported; "info" is its own default for everything else. A RUST_LOG the user set is left as it is.
+_RERUN_LOG_FILTER = "info,re_grpc_client::write=error"
+
+
+def _import_rerun():
+    """``rerun``, imported with :data:`_RERUN_LOG_FILTER` unless the user set RUST_LOG (the variable is set for
+    the import only: a spawned viewer keeps its own default)."""
+    if "rerun" in sys.modules or "RUST_LOG" in os.environ:
+        import rerun
+        return rerun
+    os.environ["RUST_LOG"] = _RERUN_LOG_FILTER
+    try:
+        import rerun
+    finally:
+        os.environ.pop("RUST_LOG", None)
+    return rerun
 
 
 class ViewerUnavailable(RuntimeError):
@@ -192,7 +211,7 @@ class RerunLogger(RunLogger):
                  recording_name: str | None = None, srp_radius_m: float = 0.45, trail_every: int = 20,
                  timeout_s: float = VIEWER_TIMEOUT_S) -> None:
         """Raises :class:`ViewerUnavailable` when a ``spawn`` / ``connect`` viewer cannot be reached."""
-        import rerun as rr
+        rr = _import_rerun()
 
         check_interrupt()  # after the slow import and the viewer probe; nothing to undo yet (see robot.interrupt)
         self.rr = rr
@@ -427,6 +446,7 @@ def rescue_blueprint():
     """The viewer layout of a rescue recording: the 3D world and robot (left, large), the SRP map seen
     from the array with detections and truth (top right), the plots (middle right) and the behaviour log
     (bottom right), on the ``sim_time`` timeline."""
+    _import_rerun()
     import rerun.blueprint as rrb
 
     return rrb.Blueprint(
