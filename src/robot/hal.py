@@ -50,9 +50,10 @@ class AudioSource(ABC):
         after stopping so that it listens to fresh, motor-noise-free audio.
         Finite sources (replay) keep their position: default is a no-op."""
 
-    def resync(self) -> None:  # noqa: B027 - optional hook
+    def resync(self, slip_samples: float | None = None) -> None:  # noqa: B027 - optional hook
         """Re-measure the alignment between capture devices now (the microphone health monitor saw them
-        slip). Single-device and finite sources have nothing to align: default is a no-op."""
+        slip, by ``slip_samples`` if it measured it: positive = the second device later). Single-device and
+        finite sources have nothing to align: default is a no-op."""
 
     def close(self) -> None:  # noqa: B027 - optional hook
         """Release the device."""
