@@ -109,6 +109,18 @@ def _check_options(args) -> None:
         raise ValueError(f"--max-victims: expected an integer >= 1, got {args.max_victims}")
 
 
+def _check_models() -> None:
+    """Every model file the behaviour uses, loaded and run on silence before the drive or the audio opens: a bad
+    one stops the program at once (exit code 2, the message names the file), not at the first listen."""
+    from robot.hearing import VAD_RATE
+    from robot.vad import ModelError, check_model
+
+    try:
+        check_model(VAD_RATE)
+    except ModelError as exc:
+        raise ValueError(str(exc)) from None
+
+
 def _open_drive(args, clock: Clock):
     if args.dry_run:
         from robot.replay import DryRunDrive
@@ -241,6 +253,7 @@ def main(argv: list[str] | None = None, out=None) -> int:
     try:
         _check_options(args)
         config, sections = _rescue_config(args)
+        _check_models()
     except ValueError as exc:
         return fail(str(exc))
     drive = audio = None

@@ -21,24 +21,48 @@ from robot.interrupt import deferred_sigint
 # a Ctrl-C meanwhile must already find the handler of main() (see robot.interrupt).
 
 
+def _checked_models() -> None:
+    """The robot's model files loaded and run on silence before anything is simulated or written; a bad one is
+    refused like a bad option (exit code 2, the message names the file)."""
+    from robot.hearing import VAD_RATE
+    from robot.vad import ModelError, check_model
+
+    try:
+        check_model(VAD_RATE)
+    except ModelError as exc:
+        raise ValueError(str(exc)) from None
+
+
 def _run(args: argparse.Namespace) -> int:
-    from ssl_sim.runner import check_output_dir, format_summary, run_scenario
+    from contextlib import ExitStack
+
+    from ssl_sim.runner import format_summary, output_dir, run_scenario
     from ssl_sim.scenario import load_scenario
     from ssl_sim.viz import parse_rerun_target
 
     sc = load_scenario(args.scenario)
+    for option, name, value in (("--seed", "seed", args.seed), ("--time-limit", "time_limit_s", args.time_limit)):
+        try:
+            sc.with_overrides(**{name: value})
+        except ValueError as exc:
+            raise ValueError(str(exc).replace(name, option, 1)) from None
+    _checked_models()
     seed = args.seed if args.seed is not None else sc.seed
     out = Path(args.out) if args.out else Path("out") / "runs" / f"{sc.name}_seed{seed}"
-    # Fail now, not after the whole simulation.
-    check_output_dir(out, "--out")
-    if args.rerun:
-        mode, arg = parse_rerun_target(args.rerun)
-        if mode == "save":
-            check_output_dir(Path(arg).parent, "--rerun save:")
-    result = run_scenario(sc, seed=args.seed, time_limit_s=args.time_limit, rerun=args.rerun, out_dir=out,
-                          progress=not args.quiet)
+    with ExitStack() as made:   # outputs checked now, not after the whole simulation; removed if it is refused
+        made.enter_context(output_dir(out, "--out"))
+        if args.rerun:
+            mode, arg = parse_rerun_target(args.rerun)
+            if mode == "save":
+                made.enter_context(output_dir(Path(arg).parent, "--rerun save:"))
+        result = run_scenario(sc, seed=args.seed, time_limit_s=args.time_limit, rerun=args.rerun, out_dir=out,
+                              progress=not args.quiet)
     print(format_summary(result))
     print(f"wrote {out / 'results.json'}" + (f" and {result['rerun_file']}" if result.get("rerun_file") else ""))
+    if result.get("failure"):
+        print(f"ssl-rescue: error: the run failed ({result['end_reason']}): {result['failure']['error']}",
+              file=sys.stderr)
+        return 1
     if args.json:
         print(json.dumps({k: result[k] for k in ("scenario", "seed", "n_found", "n_victims", "sim_time_s",
                                                   "path_length_m", "collisions", "spl")}))
@@ -50,6 +74,7 @@ def _sweep(args: argparse.Namespace) -> int:
     from ssl_sim.sweep import markdown_table, parse_seeds, run_sweep, summarize, write_tables
 
     seeds = parse_seeds(args.seeds)
+    _checked_models()
     check_output_dir(args.out, "--out")  # now, not after the whole sweep
     rows = run_sweep(args.scenarios, seeds, cluster=args.cluster, workers=args.workers,
                      time_limit_s=args.time_limit, progress=not args.quiet)
