@@ -94,6 +94,8 @@ def _record(args: argparse.Namespace) -> int:
     truth = record_scenario(load_scenario(args.scenario), args.out, seed=args.seed, duration_s=args.duration,
                             pose=pose)
     out = Path(args.out)
+    if truth["interrupted"]:
+        print(f"ssl-rescue: interrupted: recorded {truth['duration_s']:.2f} of {args.duration:g} s", file=sys.stderr)
     print(f"wrote {out} ({truth['n_channels']} channels, {truth['duration_s']:.2f} s at {truth['fs']} Hz, int16) "
           f"and {out.with_suffix('.json')} (truth every {truth['frame_s']} s, array frame)")
     for s in truth["sources"]:
@@ -104,7 +106,7 @@ def _record(args: argparse.Namespace) -> int:
     print(f"room RT60 at 1 kHz: {rt['simulated'][k]:.2f} s simulated (the scene's materials alone: "
           f"{rt['scene_materials'][k]:.2f} s)")
     print(f"try: ssl-locate {out} --array cube8 --sources {max(1, len(truth['sources']))}")
-    return 0
+    return 130 if truth["interrupted"] else 0
 
 
 def _list(args: argparse.Namespace) -> int:
@@ -163,13 +165,14 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     try:
         # Ctrl-C is raised at check points only, never inside an import (robot.interrupt): here at the end of
-        # parsing (which imports the scenarios), in ``run`` at every simulated tick. ``sweep`` and ``record`` have
-        # no check points and keep Python's immediate KeyboardInterrupt (a sweep's workers get the Ctrl-C too).
+        # parsing (which imports the scenarios), in ``run`` at every simulated tick, in ``record`` at every audio
+        # block (the recording so far is kept). ``sweep`` has no check points and keeps Python's immediate
+        # KeyboardInterrupt (a sweep's workers get the Ctrl-C too).
         with deferred_sigint():
             args = build_parser().parse_args(argv)
             logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
-            if args.func is _run:
-                return _run(args)
+            if args.func in (_run, _record):
+                return args.func(args)
         return args.func(args)
     except (ValueError, FileNotFoundError) as exc:  # ScenarioError is a ValueError
         print(f"ssl-rescue: error: {exc}", file=sys.stderr)
