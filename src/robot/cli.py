@@ -16,7 +16,7 @@ import logging
 import math
 import sys
 
-from robot.config_values import field_values
+from robot.config_values import field_values, in_section
 from robot.coverage import CoverageConfig
 from robot.hal import Clock, ManualClock, WallClock
 from robot.interrupt import check_interrupt, deferred_sigint
@@ -82,15 +82,21 @@ def _rescue_config(args) -> tuple[RescueConfig, dict]:
         if dot and section not in _SECTIONS:
             raise ValueError(f"--set {item!r}: unknown section {section!r}; expected one of {sorted(_SECTIONS)}")
         values.setdefault(section, {})[field] = text
+    plain = values.pop("", {})
     try:
-        changes = field_values(RescueConfig, values.pop("", {}), "--set", text=True, sep=" ")
+        changes = field_values(RescueConfig, plain, "--set", text=True, sep=" ")
         config = RescueConfig(**{"max_victims": args.max_victims, **changes})
-        sections = {sec: _SECTIONS[sec](**field_values(_SECTIONS[sec], vals, f"--set {sec}", text=True))
-                    for sec, vals in values.items()}
-        return config, sections
     except (ValueError, TypeError) as exc:
-        msg = str(exc)
-        raise ValueError(msg if msg.startswith("--set") else f"--set: {msg}") from None
+        msg = in_section(str(exc), RescueConfig, "")   # "RescueConfig.listen_s: ..." -> "listen_s: ..."
+        raise ValueError(msg if msg.startswith("--set") else f"--set {msg}") from None
+    sections = {}
+    for sec, vals in values.items():
+        try:
+            sections[sec] = _SECTIONS[sec](**field_values(_SECTIONS[sec], vals, f"--set {sec}", text=True))
+        except (ValueError, TypeError) as exc:   # "SoundMapConfig.seed=-1: ..." -> "--set sound_map.seed=-1: ..."
+            msg = in_section(str(exc), _SECTIONS[sec], sec)
+            raise ValueError(msg if msg.startswith("--set") else f"--set {msg}") from None
+    return config, sections
 
 
 def _check_options(args) -> None:
@@ -274,7 +280,12 @@ def main(argv: list[str] | None = None, out=None) -> int:
     src = args.replay or f"audio devices {args.audio}"
     drv = "dry run (no motors)" if args.dry_run else f"drive on {args.serial}"
     print(f"{PROG}: rescue on {src}, {drv}, array {geometry.name}, up to {args.max_time:g} s", file=out, flush=True)
-    behaviour = RescueBehaviour(audio, drive, clock, localizer, config, **sections)
+    try:
+        behaviour = RescueBehaviour(audio, drive, clock, localizer, config, **sections)
+    except ValueError as exc:   # a value the configs accept that the parts together cannot use (e.g. a grid)
+        for dev in (drive, audio):
+            dev.close()
+        return fail(str(exc))
     code = 0
     try:
         with deferred_sigint():

@@ -83,7 +83,9 @@ class HealthConfig:
         need(self.window_s * self.fs >= 4 * self.frame_size, "window_s", "at least 4 frames of audio")
         need(0 < self.band_hz[0] < self.band_hz[1] <= self.fs / 2, "band_hz", f"0 < low < high <= {self.fs / 2:g} Hz")
         need(0 < self.clip_fraction < 1, "clip_fraction", "a fraction in (0, 1)")
-        need(self.max_slip_samples >= 1, "max_slip_samples", "an integer >= 1")
+        # its lag table grows with it (bins x lags); larger slips are the coarse search's (_coarse_slip)
+        need(1 <= self.max_slip_samples <= self.frame_size // 4, "max_slip_samples",
+             f"an integer in [1, frame_size / 4 = {self.frame_size // 4}]")
         need(self.coarse_slip_gain > 1, "coarse_slip_gain", "a ratio > 1")
 
 

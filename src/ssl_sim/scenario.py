@@ -58,7 +58,7 @@ from typing import Any
 
 import numpy as np
 
-from robot.config_values import check_scalar, field_values
+from robot.config_values import check_scalar, field_values, in_section
 from robot.motion import MotionConfig
 from robot.coverage import CoverageConfig
 from robot.occupancy import OccupancyConfig
@@ -428,7 +428,7 @@ def parse_scenario(data: dict, base_dir: str | Path = ".", path: str = "") -> Sc
     try:
         AcousticConfig(**acoustics)
     except ValueError as exc:
-        raise err(f"acoustics: {exc}") from None
+        raise err(in_section(str(exc), AcousticConfig, "acoustics")) from None
     localizer = _dataclass(LocalizerConfig, _table(data, "localizer", where), "localizer", where)
     _check_localizer(localizer, AcousticConfig(**acoustics).fs, where)
     beh = dict(_table(data, "behaviour", where))
@@ -640,5 +640,5 @@ def _dataclass(cls, t: dict, what: str, where: str):
     kwargs = _typed_kwargs(cls, t, what, where)
     try:
         return cls(**kwargs)
-    except (ValueError, TypeError) as exc:
-        raise ScenarioError(f"{where}{what}: {exc}") from None
+    except (ValueError, TypeError) as exc:   # "Class.field=..." named as the file's "section.field=..."
+        raise ScenarioError(f"{where}{in_section(str(exc), cls, what)}") from None
