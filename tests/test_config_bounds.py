@@ -114,3 +114,17 @@ def test_ransac_table_refused_with_its_memory_estimate_which_bounds_the_measured
                                          r"max_table_mb=512 MB: .* needs about [\d.]+ GB"):
         SoundMapConfig(max_rays=100_000)
     assert RescueConfig()   # the defaults pass
+
+
+def test_scenario_localizer_grid_refused_at_load_with_its_memory_estimate(tmp_path):
+    from ssl_core.geometry import cube8
+    from ssl_core.localizer import Localizer, LocalizerConfig
+
+    p = tmp_path / "s.toml"
+    p.write_text(BASE + "[localizer]\nresolution_deg = 0.05\n")
+    with pytest.raises(ScenarioError, match=r"^s\.toml: localizer\.resolution_deg=0\.05: .* steering tables need "
+                                            r"about \d+ MB, more than max_table_mb=1024"):
+        load_scenario(p)
+    # the same limit the localizer itself applies when built
+    with pytest.raises(ValueError, match="steering tables need about"):
+        Localizer(cube8(), LocalizerConfig(resolution_deg=0.05))

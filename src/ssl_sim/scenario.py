@@ -66,7 +66,8 @@ from robot.planner import PlannerConfig
 from robot.rescue import RescueConfig
 from robot.sound_map import SoundMapConfig
 from ssl_core.gcc_phat import band_bins
-from ssl_core.localizer import LocalizerConfig
+from ssl_core.geometry import cube8
+from ssl_core.localizer import LocalizerConfig, check_table_memory
 from ssl_sim.acoustics import AcousticConfig, AmbientNoise, SoundSource, noise_source
 from ssl_sim.acoustics.signals import LoopedSignal
 from ssl_sim.acoustics.sources import PAPER_LEVEL_DB_SPL
@@ -456,6 +457,10 @@ def _check_localizer(cfg: LocalizerConfig, audio_fs: int, where: str) -> None:
         band_bins(cfg.fs, cfg.frame_size, cfg.band_hz)
     except ValueError as exc:
         raise ScenarioError(f"{where}localizer.band_hz: {exc}") from None
+    try:   # the simulated robot's cube: its steering tables' memory, estimated before anything is built
+        check_table_memory(cfg, len(cube8().pairs))
+    except ValueError as exc:
+        raise ScenarioError(f"{where}{in_section(str(exc), LocalizerConfig, 'localizer')}") from None
 
 
 def _scene(t: dict, base_dir: Path, where: str) -> SceneSpec:
