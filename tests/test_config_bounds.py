@@ -128,3 +128,15 @@ def test_scenario_localizer_grid_refused_at_load_with_its_memory_estimate(tmp_pa
     # the same limit the localizer itself applies when built
     with pytest.raises(ValueError, match="steering tables need about"):
         Localizer(cube8(), LocalizerConfig(resolution_deg=0.05))
+
+
+def test_a_room_whose_truth_grid_exceeds_memory_is_refused_with_the_estimate(tmp_path):
+    """A 300 x 300 m room: the run's 5 cm free-space grid would be 36 M cells, about 21.6 GB at the measured
+    <= 600 B per cell; refused when the scenario is loaded, before any grid is built."""
+    (tmp_path / "hall.toml").write_text('name = "hall"\nrobot_start = [1.0, 1.0, 0.0]\n[room]\n'
+                                        'size = [300.0, 300.0, 3.0]\n')
+    p = tmp_path / "s.toml"
+    p.write_text(BASE.replace('name = "empty_lab"', 'file = "hall.toml"'))
+    with pytest.raises(ScenarioError, match=r"^s\.toml: scene room\.size: 300 x 300 m: .* 36000000 cells and needs "
+                                            r"about 21600 MB, more than 2048 MB"):
+        load_scenario(p).world()

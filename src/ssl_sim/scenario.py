@@ -274,9 +274,23 @@ def _where(path: str) -> str:
     return f"{Path(path).name}: " if path else ""
 
 
+#: The run's truth grid (``ssl_sim.runner.FreeSpacePaths``: 5 cm cells of the free floor, 16-connected, for the
+#: shortest paths of the score): tracemalloc peak 265-531 bytes per cell on the shipped scenes (more free floor,
+#: more edges); 600 taken. Rooms needing more than ``MAX_TRUTH_GRID_MB`` are refused when the world is built.
+TRUTH_GRID_BYTES_PER_CELL = 600
+MAX_TRUTH_GRID_MB = 2048.0
+
+
 def _check_world(world: World, sc: Scenario, where: str) -> None:
-    """Victims in air, in the room, apart from the start; the start on free floor; all reachable."""
+    """The room's truth grid within memory; victims in air, in the room, apart from the start; the start on free
+    floor; all reachable."""
     room = world.room
+    cells = math.ceil(room.size[0] / 0.05) * math.ceil(room.size[1] / 0.05)
+    need_mb = cells * TRUTH_GRID_BYTES_PER_CELL / 1e6
+    if need_mb > MAX_TRUTH_GRID_MB:
+        raise ScenarioError(f"{where}scene room.size: {room.size[0]:g} x {room.size[1]:g} m: the run's free-space "
+                            f"grid (5 cm cells, for the score's shortest paths) has {cells} cells and needs about "
+                            f"{need_mb:.0f} MB, more than {MAX_TRUTH_GRID_MB:g} MB")
     x, y, yaw = world.robot_start
     if not room.contains([x, y, 1.0], margin=0.2):
         raise ScenarioError(f"{where}robot.start: ({x}, {y}) is outside the room {list(room.size)} "
