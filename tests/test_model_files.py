@@ -182,3 +182,26 @@ def test_a_run_whose_model_fails_says_so_in_its_results_and_exit_code(monkeypatc
     assert result["end_reason"] == "failed_model"
     assert result["failure"]["part"] == "model" and "silero_vad_8k_encoder" in result["failure"]["file"]
     assert "failed_model" in capsys.readouterr().err
+
+
+def test_ssl_robot_exits_1_naming_the_model_that_failed_while_running(monkeypatch, tmp_path, capsys):
+    """A replay with a talker: the model breaks after the start check; the mission fails (exit 1, the file named),
+    it does not end as audio_ended."""
+    from scipy.io import wavfile
+
+    import robot.cli as cli
+
+    clock = ManualClock()
+    x = np.concatenate([_Talker(clock).read(16000).samples for _ in range(3)], axis=1)
+    rec = tmp_path / "rec.wav"
+    wavfile.write(rec, 16000, (0.3 * x.T / np.abs(x).max() * 32767).astype(np.int16))
+
+    def broken(self, inputs, state):
+        raise EOFError("Compressed file ended before the end-of-stream marker was reached")
+
+    check_model(8000)   # checked at the start, as a program does; the model breaks afterwards
+    monkeypatch.setattr(vad.SileroVad, "_run_split", broken)
+    assert cli.main(["--dry-run", "--replay", str(rec), "--json", "--max-time", "100"]) == 1
+    got = capsys.readouterr()
+    assert "silero_vad_8k_encoder.onnx.gz: failed at run time" in got.err
+    assert '"audio_ended"' not in got.out
