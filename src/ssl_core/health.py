@@ -237,12 +237,13 @@ class MicHealth:
         if not (first.any() and other.any()):
             return 0
         n = x.shape[1]
-        spec = scipy.fft.rfft(x - x.mean(axis=1, keepdims=True), 2 * n, axis=1)
-        f = np.fft.rfftfreq(2 * n, 1.0 / cfg.fs)
+        half = n // 2
+        nfft = scipy.fft.next_fast_len(n + half + 1)   # lags up to +-half without circular wrap-around
+        spec = scipy.fft.rfft(x - x.mean(axis=1, keepdims=True), nfft, axis=1)
+        f = np.fft.rfftfreq(nfft, 1.0 / cfg.fs)
         band = (f >= cfg.band_hz[0]) & (f <= cfg.band_hz[1])
         u = np.where(band, spec / np.maximum(np.abs(spec), 1e-30), 0)
-        cc = scipy.fft.irfft(u[first].sum(axis=0) * np.conj(u[other].sum(axis=0)), 2 * n)
-        half = n // 2
+        cc = scipy.fft.irfft(u[first].sum(axis=0) * np.conj(u[other].sum(axis=0)), nfft)
         lags = np.r_[np.arange(half + 1), np.arange(-half, 0)]
         mag = np.abs(np.r_[cc[:half + 1], cc[-half:]])
         near = np.abs(lags) <= self._near
