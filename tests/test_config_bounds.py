@@ -140,3 +140,29 @@ def test_a_room_whose_truth_grid_exceeds_memory_is_refused_with_the_estimate(tmp
     with pytest.raises(ScenarioError, match=r"^s\.toml: scene room\.size: 300 x 300 m: .* 36000000 cells and needs "
                                             r"about 21600 MB, more than 2048 MB"):
         load_scenario(p).world()
+
+
+@pytest.mark.parametrize("case", ["seed", "building", "sweep"])
+def test_a_refused_run_leaves_no_folder(case, tmp_path, capsys, monkeypatch):
+    """Refused before simulating (a bad --seed), while the run is built (after --out was made and proven
+    writable) or a sweep naming an unknown scenario: exit code 2, the reason on stderr, no output folder left."""
+    import ssl_sim.runner as runner
+    from ssl_sim.cli import main
+
+    made = []
+
+    def refused(*a, **k):
+        made.append(out.is_dir())
+        raise ScenarioError("robot.start: overlaps obstacle 3")
+
+    monkeypatch.setattr(runner, "RescueRun", refused)
+    out = tmp_path / "runs" / "x"
+    argv = {"seed": ["run", "paper_lab", "--seed", "-1", "--out", str(out)],
+            "building": ["run", "paper_lab", "--out", str(out), "-q"],
+            "sweep": ["sweep", "no_such_scenario", "--seeds", "0:1", "--out", str(out), "-q"]}[case]
+    assert main(argv) == 2
+    err = capsys.readouterr().err
+    assert {"seed": "--seed: expected an integer >= 0", "building": "overlaps obstacle",
+            "sweep": "no_such_scenario"}[case] in err
+    assert made == ([True] if case == "building" else [])   # the folder existed while the run was built
+    assert not (tmp_path / "runs").exists()

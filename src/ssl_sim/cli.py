@@ -70,16 +70,16 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _sweep(args: argparse.Namespace) -> int:
-    from ssl_sim.runner import check_output_dir
+    from ssl_sim.runner import output_dir
     from ssl_sim.sweep import markdown_table, parse_seeds, run_sweep, summarize, write_tables
 
     seeds = parse_seeds(args.seeds)
     _checked_models()
-    check_output_dir(args.out, "--out")  # now, not after the whole sweep
-    rows = run_sweep(args.scenarios, seeds, cluster=args.cluster, workers=args.workers,
-                     time_limit_s=args.time_limit, progress=not args.quiet)
-    tables = summarize(rows)
-    paths = write_tables(rows, tables, args.out)
+    with output_dir(args.out, "--out"):  # checked now, not after the whole sweep; removed again if it is refused
+        rows = run_sweep(args.scenarios, seeds, cluster=args.cluster, workers=args.workers,
+                         time_limit_s=args.time_limit, progress=not args.quiet)
+        tables = summarize(rows)
+        paths = write_tables(rows, tables, args.out)
     print(markdown_table(tables["scenarios"]))
     print(markdown_table(tables["victims"]))
     print("wrote " + ", ".join(str(p) for p in paths.values()))
