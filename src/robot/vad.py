@@ -35,12 +35,12 @@ its leftover samples; all streams with a whole frame pending go through the netw
 """
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
 import functools
 import gzip
+import math
 import zipfile
 import zlib
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -178,7 +178,8 @@ class SileroVad:
             # tanh serves all four gates
             self._half = np.repeat(np.array([0.5, 0.5, 1.0, 0.5], np.float32), _HIDDEN)
             w = _load_lstm(self.lstm_path)
-            self._w_hh_t = (w["weight_hh"] * self._half[:, None]).T.astype(np.float32)  # (state 128, 4 gates x 128)
+            self._w_hh_t = np.ascontiguousarray((w["weight_hh"] * self._half[:, None]).T,  # (state 128, 4 gates x 128)
+                                                dtype=np.float32)
             self._out_w = w["out_weight"].astype(np.float32)
             self._out_b = float(np.ravel(w["out_bias"])[0])
         self.sample_rate = sample_rate
