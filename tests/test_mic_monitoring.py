@@ -120,8 +120,9 @@ def test_a_one_sample_device_slip_is_seen_by_the_monitor_and_resynced():
 @pytest.mark.parametrize("slip", [80, -80, 2000])
 def test_a_large_device_slip_is_named_and_corrected_within_2_s(slip):
     """A talker in a reverberant room; device B's stream slips by 80 samples (5 ms, ten times the pair delays'
-    own search) or 2000 (125 ms) 2 s in, scheduled tracking off: the monitor names the slip with its size, the capture re-aligns
-    within 2 s of audio, and the bearings after it are as good as those of the same audio never slipped."""
+    own search) or 2000 (125 ms) 2 s in, scheduled tracking off: the monitor names the slip with its size, the
+    capture re-aligns within 2 s of audio, and the bearings after it are as good as those of the same audio never
+    slipped."""
     from signals import room_talker
     from test_audio_capture import _devices, _FakeSD, _unit
 

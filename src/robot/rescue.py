@@ -378,7 +378,7 @@ class RescueBehaviour:
             return []
         try:
             self._cycle()
-        except EndOfAudio as exc:   # the source's own end of stream; any other EOFError (a model's gzip) is a failure
+        except EndOfAudio as exc:   # the source's own end of stream (any other EOFError, e.g. a model's, fails)
             self._finish(Decision.AUDIO_ENDED, f"audio source exhausted ({exc})")
         except BaseException as exc:
             failed = self._safe_stop()

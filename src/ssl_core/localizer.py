@@ -162,7 +162,8 @@ def check_table_memory(cfg: LocalizerConfig, n_pairs: int) -> float:
         raise ValueError(
             f"LocalizerConfig.resolution_deg={cfg.resolution_deg:g}: the fine grid has about {n_fine:.0f} "
             f"points, its steering tables need about {need_mb:.0f} MB, more than max_table_mb="
-            f"{cfg.max_table_mb:g}; use a coarser resolution (memory grows as 1/resolution^2) or raise max_table_mb")
+            f"{cfg.max_table_mb:g}; use a coarser resolution (memory grows as 1/resolution^2) or raise "
+            "max_table_mb")
     return need_mb
 
 

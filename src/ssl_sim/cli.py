@@ -95,7 +95,8 @@ def _record(args: argparse.Namespace) -> int:
                             pose=pose)
     out = Path(args.out)
     if truth["interrupted"]:
-        print(f"ssl-rescue: interrupted: recorded {truth['duration_s']:.2f} of {args.duration:g} s", file=sys.stderr)
+        print(f"ssl-rescue: interrupted: recorded {truth['duration_s']:.2f} of {args.duration:g} s",
+              file=sys.stderr)
     print(f"wrote {out} ({truth['n_channels']} channels, {truth['duration_s']:.2f} s at {truth['fs']} Hz, int16) "
           f"and {out.with_suffix('.json')} (truth every {truth['frame_s']} s, array frame)")
     for s in truth["sources"]:

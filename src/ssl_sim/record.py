@@ -64,7 +64,8 @@ def check_record_paths(out_wav: str | Path, out_json: str | Path | None = None,
     truth = Path(out_json) if out_json is not None else wav.with_suffix(".json")
     if truth.absolute() == wav.absolute():
         raise ValueError(f"{what} {text}: the truth JSON is written to the WAV's name with .json, which is this "
-                         f"name: the JSON would overwrite the recording; give a .wav name, e.g. {wav.with_suffix('.wav')}")
+                         "name: the JSON would overwrite the recording; give a .wav name, e.g. "
+                         f"{wav.with_suffix('.wav')}")
     if truth.is_dir():
         raise ValueError(f"{what} {text}: the truth JSON's name {truth} is a directory")
     folder = wav.absolute().parent
