@@ -54,7 +54,7 @@ def _nan_wav(tmp_path: Path) -> Path:
     (lambda t, d: t + "[localizer]\nband_hz = [300.0, 9000.0]\n", "localizer.band_hz"),
     (lambda t, d: t.replace("[3.9, 2.2, 0.1]", f"[3.9, 2.2, 0.1]\nsound = 'file'\nfile = '{_nan_wav(d)}'"),
      "victims[0].file: "),
-    (lambda t, d: t + "[behaviour]\nfatal_faults = ['none']\n", "RescueConfig.fatal_faults"),
+    (lambda t, d: t + "[behaviour]\nfatal_faults = ['none']\n", "behaviour.fatal_faults"),
 ])
 def test_scenario_values_that_failed_at_run_time_are_named_at_load_time(tmp_path, capsys, edit, field):
     path = _scenario(tmp_path, edit(GOOD, tmp_path))

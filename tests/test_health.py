@@ -54,6 +54,8 @@ FAULTS = {
     "common_mode": (lambda x: x + 0.05 * np.random.default_rng(2).standard_normal(x.shape[1]), "common_mode", tuple(range(8))),
     "slip_1": (lambda x: _slip(x, 1), "device_slip", (4, 5, 6, 7)),
     "slip_3": (lambda x: _slip(x, 3), "device_slip", (4, 5, 6, 7)),
+    # 5 ms: far beyond the pair delays' own search (+-8 samples beyond the geometric delay)
+    "slip_80": (lambda x: _slip(x, 80), "device_slip", (4, 5, 6, 7)),
 }
 
 
@@ -73,7 +75,7 @@ def test_each_fault_named_within_two_seconds(talkers, name):
         faults = [f for f in reports[-1].faults]
         assert [(f.kind, f.channels) for f in faults] == [(kind, channels)], [str(f) for f in faults]
     if name.startswith("slip"):
-        assert faults[0].value == pytest.approx(int(name[-1]), abs=0.4)  # the slip's size, in samples
+        assert faults[0].value == pytest.approx(int(name.split("_")[1]), abs=0.4)  # the slip's size, in samples
 
 
 def test_healthy_array_and_sensor_noise_raise_nothing(talkers):

@@ -115,3 +115,55 @@ def test_a_one_sample_device_slip_is_seen_by_the_monitor_and_resynced():
     assert len(slips) == 1 and slips[0][1] == pytest.approx(1.0, abs=0.4)
     assert fixed_at is not None and fixed_at - (at - 300) <= 2 * FS  # within 2 s of audio after the slip
     assert not audio.report.faults                                     # and the fault has cleared
+
+
+@pytest.mark.parametrize("slip", [80, -80, 2000])
+def test_a_large_device_slip_is_named_and_corrected_within_2_s(slip):
+    """A talker in a reverberant room; device B's stream slips by 80 samples (5 ms, ten times the pair delays'
+    own search) or 2000 (125 ms) 2 s in, scheduled tracking off: the monitor names the slip with its size, the
+    capture re-aligns within 2 s of audio, and the bearings after it are as good as those of the same audio never
+    slipped."""
+    from signals import room_talker
+    from test_audio_capture import _devices, _FakeSD, _unit
+
+    from robot.hardware.audio import ArrayCapture
+    from robot.monitored_audio import MonitoredAudio
+    from ssl_core.grid import angular_distance
+    from ssl_core.health import MicHealth
+    from ssl_core.localizer import Localizer, LocalizerConfig
+
+    g = cube8()
+    u = _unit(-70, 20)
+    truth = 0.5 * room_talker(g.positions, u, 7.0, FS, seed=5)
+    before, after = _devices(truth, 300), _devices(truth, 300 + slip)
+    at = 2 * FS
+    cap = ArrayCapture((1, 2), FS, positions=g.positions, blocksize=512, track_every_s=None,
+                       backend=_FakeSD([before[0], np.concatenate([before[1][:, :at], after[1][:, at:]], axis=1)],
+                                       pace=0.15))
+    cap.merger.set_offset(300)
+    seen = []
+    audio = MonitoredAudio(cap, MicHealth(g, devices=[0] * 4 + [1] * 4),
+                           on_change=lambda t, new, cleared: seen.extend((f.kind, f.value) for f in new))
+    loc = Localizer(g, LocalizerConfig(fs=FS, n_sources=1))
+    fixed_at, late = None, []
+    while cap.merger.cursor < 6 * FS:
+        block = audio.read(1600)
+        if fixed_at is None and cap.merger.offset == 300 + slip:
+            fixed_at = cap.merger.cursor
+        if fixed_at is not None and cap.merger.cursor - 1600 >= fixed_at:
+            late.append((cap.merger.cursor - 1600, block.samples))
+    cap.close()
+    slips = [v for kind, v in seen if kind == "device_slip"]
+    assert len(slips) == 1 and slips[0] == pytest.approx(slip, abs=0.5)
+    assert fixed_at is not None and fixed_at - (at - 300) <= 2 * FS   # within 2 s of audio after the slip
+    assert len(late) >= 10
+
+    def error(samples) -> float:
+        r = loc.locate(samples)
+        return float(np.rad2deg(angular_distance(r.detections[0].direction, u))) if r.detections else 180.0
+
+    # the same instants of the audio as never slipped (array truth), localized the same way
+    got = np.mean([error(s) for _, s in late])
+    ref = np.mean([error((truth[:, c:c + 1600] * 32767).astype(np.int16)) for c, _ in late])
+    print(f"slip {slip}: mean bearing error after correction {got:.2f} deg, never slipped {ref:.2f} deg")
+    assert got <= ref + 0.5

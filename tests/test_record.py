@@ -118,3 +118,69 @@ def test_bad_pose_names_the_option(tmp_path, capsys):
     assert "--pose" in capsys.readouterr().err
     assert cli_main(["record", "paper_lab", "--duration", "-1", "--out", str(tmp_path / "x.wav")]) == 2
     assert "--duration" in capsys.readouterr().err
+
+
+def _never_simulated(monkeypatch):
+    """Building the scenario's HAL fails the test: a refused --out must be found before anything is simulated."""
+    from ssl_sim.scenario import Scenario
+
+    monkeypatch.setattr(Scenario, "hal", lambda *a, **k: pytest.fail("simulated before --out was checked"))
+
+
+@pytest.mark.parametrize("case", ["json_name", "directory", "directory_slash", "empty", "parent_is_a_file"])
+def test_bad_out_is_refused_before_recording(case, tmp_path, capsys, monkeypatch):
+    (tmp_path / "notes.txt").write_text("a file")
+    out, expected = {
+        "json_name": (str(tmp_path / "take.json"), "would overwrite the recording"),
+        "directory": (str(tmp_path), "is a directory"),
+        "directory_slash": (str(tmp_path / "new") + "/", "is a directory"),
+        "empty": ("", "expected a WAV file name"),
+        # root may write anywhere: a path under a regular file is what nobody can create
+        "parent_is_a_file": (str(tmp_path / "notes.txt" / "take.wav"), "notes.txt is a file, not a directory"),
+    }[case]
+    _never_simulated(monkeypatch)
+    before = sorted(tmp_path.rglob("*"))
+    assert cli_main(["record", "paper_lab", "--duration", "2", "--out", out]) == 2
+    err = capsys.readouterr().err
+    assert err.startswith("ssl-rescue: error: --out") and expected in err and "Traceback" not in err, err
+    assert sorted(tmp_path.rglob("*")) == before   # nothing written or created
+
+
+def test_interrupted_recording_leaves_a_valid_shorter_wav_and_json(tmp_path):
+    """Ctrl-C 2 s of audio into a 60 s recording: exit 130, and the WAV and truth JSON hold the same, shorter
+    duration (a WAV whose header matches its data; truth frames covering it)."""
+    import os
+    import signal
+    import subprocess
+    import sys
+    import time
+    from pathlib import Path
+
+    src = Path(__file__).resolve().parents[1] / "src"
+    out = tmp_path / "take.wav"
+    partial = tmp_path / ".take.wav.partial"
+    p = subprocess.Popen([sys.executable, "-m", "ssl_sim.cli", "record", "paper_lab", "--duration", "60",
+                          "--out", str(out)], env=dict(os.environ, PYTHONPATH=str(src)), stdout=subprocess.PIPE,
+                         stderr=subprocess.PIPE, text=True,
+                         preexec_fn=lambda: signal.signal(signal.SIGINT, signal.SIG_DFL))
+    try:
+        deadline = time.monotonic() + 240
+        while time.monotonic() < deadline and p.poll() is None:
+            if partial.exists() and partial.stat().st_size > 44 + 2 * 8 * 16000 * 2:   # 2 s of audio written
+                break
+            time.sleep(0.05)
+        assert p.poll() is None, p.communicate()
+        p.send_signal(signal.SIGINT)
+        stdout, stderr = p.communicate(timeout=120)
+    finally:
+        p.kill()
+    assert p.returncode == 130, stderr
+    assert "interrupted" in stderr and "Traceback" not in stderr, stderr
+    fs, data = wavfile.read(out)   # a valid WAV: its header's length is its data's
+    assert fs == 16000 and data.dtype == np.int16 and data.shape[1] == 8
+    assert out.stat().st_size == 44 + data.size * 2
+    truth = json.loads(out.with_suffix(".json").read_text())
+    assert truth["interrupted"] is True
+    assert 2.0 <= truth["duration_s"] < 60 and data.shape[0] == round(truth["duration_s"] * fs)
+    assert truth["time_s"][-1] <= truth["duration_s"] and len(truth["sources"][0]["azimuth_deg"]) == len(truth["time_s"])
+    assert not partial.exists()

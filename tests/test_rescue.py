@@ -6,7 +6,7 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
-from robot.hal import AudioBlock, AudioSource, DriveStatus, ManualClock
+from robot.hal import AudioBlock, AudioSource, DriveStatus, EndOfAudio, ManualClock
 from robot.motion import MotionConfig
 from robot.odometry import Odometry
 from robot.ranging import RangeLayout
@@ -414,7 +414,7 @@ def test_silence_leads_to_exploration_and_audio_end_finishes():
 
     class Ending(FakeAudio):
         def read(self, n):
-            raise EOFError("rec.wav: end reached")
+            raise EndOfAudio("rec.wav: end reached")
 
     b2 = make(World([]), audio=Ending(ManualClock()))
     ev = b2.step()

@@ -90,3 +90,29 @@ def test_cli_reads_24_bit_and_float_wav_in_blocks(tmp_path, capsys):
         assert main([str(path), "--json"]) == 0
         d = json.loads(capsys.readouterr().out)["windows"][0]["detections"][0]
         assert abs(d["azimuth_deg"] - 120) < 1.5 and abs(d["elevation_deg"] + 10) < 1.5
+
+
+def test_cli_names_a_truncated_wav_and_processes_what_is_there(tmp_path, capsys):
+    """A 2 s recording cut to its first second (the header still says 2 s): a warning with both lengths, and the
+    same answer as a whole file holding that first second."""
+    u = direction_from_angles(np.deg2rad(40), np.deg2rad(-10))
+    x = 0.2 * plane_wave(cube8().positions, u, np.random.default_rng(3).standard_normal(2 * FS), FS)
+    whole = tmp_path / "whole.wav"
+    wavfile.write(whole, FS, np.round(x.T * 32767).astype(np.int16))
+    data = whole.read_bytes()
+    cut = tmp_path / "cut.wav"
+    cut.write_bytes(data[:44 + FS * 8 * 2])          # header (2 s) + the first second of frames
+    first = tmp_path / "first.wav"
+    wavfile.write(first, FS, np.round(x[:, :FS].T * 32767).astype(np.int16))
+
+    assert main([str(cut), "--stream", "--json"]) == 0
+    got = capsys.readouterr()
+    warning = got.err.strip().splitlines()
+    assert len(warning) == 1 and "warning" in warning[0] and str(cut) in warning[0], got.err
+    assert "2.000 s (32000 samples per channel)" in warning[0] and "1.000 s (16000)" in warning[0]
+    assert main([str(first), "--stream", "--json"]) == 0
+    ref = capsys.readouterr()
+    # --stream --json: one JSON line per window, the same windows for the cut file as for its first second
+    a = [json.loads(line) for line in got.out.splitlines()]
+    b = [json.loads(line) for line in ref.out.splitlines()]
+    assert ref.err == "" and a == b and len(a) > 0

@@ -93,7 +93,7 @@ def section_config(section: str) -> type:
 
 def _rescue_config(args) -> tuple[RescueConfig, dict]:
     """``--set`` values -> (``RescueConfig``, keyword configs of ``RescueBehaviour`` by section)."""
-    from robot.config_values import field_values
+    from robot.config_values import field_values, in_section
     from robot.rescue import RescueConfig
 
     values: dict[str, dict[str, str]] = {}
@@ -105,15 +105,22 @@ def _rescue_config(args) -> tuple[RescueConfig, dict]:
         if dot and section not in _SECTIONS:
             raise ValueError(f"--set {item!r}: unknown section {section!r}; expected one of {sorted(_SECTIONS)}")
         values.setdefault(section, {})[field] = text
+    plain = values.pop("", {})
     try:
-        changes = field_values(RescueConfig, values.pop("", {}), "--set", text=True, sep=" ")
+        changes = field_values(RescueConfig, plain, "--set", text=True, sep=" ")
         config = RescueConfig(**{"max_victims": args.max_victims, **changes})
-        sections = {sec: section_config(sec)(**field_values(section_config(sec), vals, f"--set {sec}", text=True))
-                    for sec, vals in values.items()}
-        return config, sections
     except (ValueError, TypeError) as exc:
-        msg = str(exc)
-        raise ValueError(msg if msg.startswith("--set") else f"--set: {msg}") from None
+        msg = in_section(str(exc), RescueConfig, "")   # "RescueConfig.listen_s: ..." -> "listen_s: ..."
+        raise ValueError(msg if msg.startswith("--set") else f"--set {msg}") from None
+    sections = {}
+    for sec, vals in values.items():
+        cls = section_config(sec)
+        try:
+            sections[sec] = cls(**field_values(cls, vals, f"--set {sec}", text=True))
+        except (ValueError, TypeError) as exc:   # "SoundMapConfig.seed=-1: ..." -> "--set sound_map.seed=-1: ..."
+            msg = in_section(str(exc), cls, sec)
+            raise ValueError(msg if msg.startswith("--set") else f"--set {msg}") from None
+    return config, sections
 
 
 def _check_options(args) -> None:
@@ -130,6 +137,18 @@ def _check_options(args) -> None:
         raise ValueError(f"--fs: expected a sample rate > 0 Hz, got {args.fs}")
     if args.max_victims is not None and args.max_victims < 1:
         raise ValueError(f"--max-victims: expected an integer >= 1, got {args.max_victims}")
+
+
+def _check_models() -> None:
+    """Every model file the behaviour uses, loaded and run on silence before the drive or the audio opens: a bad
+    one stops the program at once (exit code 2, the message names the file), not at the first listen."""
+    from robot.hearing import VAD_RATE
+    from robot.vad import ModelError, check_model
+
+    try:
+        check_model(VAD_RATE)
+    except ModelError as exc:
+        raise ValueError(str(exc)) from None
 
 
 def _open_drive(args, clock: Clock):
@@ -273,6 +292,7 @@ def main(argv: list[str] | None = None, out=None) -> int:
     try:
         _check_options(args)
         config, sections = _rescue_config(args)
+        _check_models()
     except ValueError as exc:
         return fail(str(exc))
     drive = audio = recorder = None
@@ -302,7 +322,12 @@ def main(argv: list[str] | None = None, out=None) -> int:
     drv = "dry run (no motors)" if args.dry_run else f"drive on {args.serial}"
     print(f"{PROG}: rescue on {src}, {drv}, array {geometry.name}, up to {args.max_time:g} s"
           + (f", recording to {args.record}" if args.record else ""), file=say, flush=True)
-    behaviour = RescueBehaviour(audio, drive, clock, localizer, config, **sections)
+    try:
+        behaviour = RescueBehaviour(audio, drive, clock, localizer, config, **sections)
+    except ValueError as exc:   # a value the configs accept that the parts together cannot use (e.g. a grid)
+        for dev in (drive, audio):
+            dev.close()
+        return fail(str(exc))
     code = 0
     reader_gone = False
     try:

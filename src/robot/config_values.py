@@ -85,3 +85,12 @@ def need(config: Any, ok: bool, name: str, expected: str) -> None:
     """A config check: unless ``ok``, a ``ValueError`` naming the class, the field, its value and ``expected``."""
     if not ok:
         raise ValueError(f"{type(config).__name__}.{name}={getattr(config, name)!r}: expected {expected}")
+
+
+def in_section(message: str, cls: type, section: str) -> str:
+    """A config error naming ``cls``'s field as ``Class.field`` re-worded as the user wrote it: ``section.field``
+    (``section`` '': the bare field, e.g. a plain ``--set FIELD``); another message is prefixed ``section: ``."""
+    name = f"{cls.__name__}."
+    if name in message:
+        return message.replace(name, f"{section}." if section else "", 1)
+    return f"{section}: {message}" if section else message

@@ -17,6 +17,11 @@ from dataclasses import dataclass, field
 import numpy as np
 
 
+class EndOfAudio(EOFError):
+    """A finite audio source (a recording) is exhausted. The one signal that ends a mission as "audio ended": a
+    plain ``EOFError`` from elsewhere (a truncated gzip model file) is a failure, never the end of the audio."""
+
+
 @dataclass(frozen=True)
 class AudioBlock:
     """``samples``: (n_channels, n_samples), int16 or float; ``timestamp``: capture time (s) of the first sample."""
@@ -41,7 +46,7 @@ class AudioSource(ABC):
     def read(self, n_samples: int) -> AudioBlock:
         """Block until ``n_samples`` per channel are captured and return them.
 
-        Raises ``EOFError`` when a finite source (a file) is exhausted."""
+        Raises ``EndOfAudio`` (an ``EOFError``) when a finite source (a file) is exhausted."""
 
     def flush(self) -> None:  # noqa: B027 - optional hook
         """Discard audio captured but not yet read (e.g. recorded while driving).
@@ -50,9 +55,10 @@ class AudioSource(ABC):
         after stopping so that it listens to fresh, motor-noise-free audio.
         Finite sources (replay) keep their position: default is a no-op."""
 
-    def resync(self) -> None:  # noqa: B027 - optional hook
+    def resync(self, slip_samples: float | None = None) -> None:  # noqa: B027 - optional hook
         """Re-measure the alignment between capture devices now (the microphone health monitor saw them
-        slip). Single-device and finite sources have nothing to align: default is a no-op."""
+        slip, by ``slip_samples`` if it measured it: positive = the second device later). Single-device and
+        finite sources have nothing to align: default is a no-op."""
 
     def close(self) -> None:  # noqa: B027 - optional hook
         """Release the device."""

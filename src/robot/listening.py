@@ -25,7 +25,7 @@ import numpy as np
 
 from robot.hal import AudioBlock, AudioSource, Clock, as_float_audio
 from robot.hearing import VAD_RATE, speech_fractions, voice_scan
-from robot.vad import SileroVad
+from robot.vad import SileroVad, check_model
 from ssl_core.beamform import beam_signal
 from ssl_core.grid import direction_from_angles
 
@@ -96,7 +96,7 @@ class Listener:
         self.voice_threshold = voice_threshold
         self.speech = speech
         self.voice_scan_deg = voice_scan_deg
-        self._vad: SileroVad | None = None   # created on first use (loads the ONNX model)
+        self._vad: SileroVad | None = None   # on first use (``check_model``: shared, checked)
 
     def listen(self, seconds: float, settle_s: float, min_power: float) -> Listen:
         self.clock.sleep(settle_s)
@@ -126,7 +126,7 @@ class Listener:
     @property
     def vad(self) -> SileroVad:
         if self._vad is None:
-            self._vad = SileroVad(sample_rate=VAD_RATE)
+            self._vad = check_model(VAD_RATE)   # loaded and run on silence once per process and file state
         return self._vad
 
     def _scanned(self, block: AudioBlock, result: Any, dets: Sequence[Detection]) -> list[Detection]:

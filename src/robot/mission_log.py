@@ -25,7 +25,7 @@ from pathlib import Path
 
 import numpy as np
 
-from robot.hal import AudioBlock, AudioSource, Clock, DriveBase, DriveStatus, WheelOdometry
+from robot.hal import AudioBlock, AudioSource, Clock, DriveBase, DriveStatus, EndOfAudio, WheelOdometry
 
 AUDIO_FILE, LOG_FILE, META_FILE = "audio.wav", "hal.jsonl", "mission.json"
 FORMAT = "ssl-robot mission"
@@ -141,7 +141,7 @@ class _RecordedAudio(AudioSource):
     def read(self, n_samples: int) -> AudioBlock:
         try:
             block = self._src.read(n_samples)
-        except EOFError as exc:  # a finite source ended: the replay ends there too, with the same message
+        except EndOfAudio as exc:  # a finite source ended: the replay ends there too, with the same message
             self._rec.entry(eof=int(n_samples), message=str(exc))
             raise
         self._rec.entry(read=int(block.samples.shape[1]), ts=float(block.timestamp))
@@ -277,7 +277,7 @@ class _ReplayedAudio(AudioSource):
     def read(self, n_samples: int) -> AudioBlock:
         if not self._m.finished and "eof" in self._m._entries[self._m._next]:
             e = self._m.take("eof")
-            raise EOFError(e.get("message") or f"replay of {self._m.directory}: the recorded audio ended here")
+            raise EndOfAudio(e.get("message") or f"replay of {self._m.directory}: the recorded audio ended here")
         e = self._m.take("read")
         if e["read"] != n_samples:
             raise MissionDiverged(f"replay of {self._m.directory}: the behaviour read {n_samples} samples, the "

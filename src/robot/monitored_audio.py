@@ -79,16 +79,17 @@ class MonitoredAudio(AudioSource):
                     log.warning("localizing without microphone(s) %s", list(report.excluded))
                 else:
                     log.info("localizing with all microphones again")
-        if any(f.kind == "device_slip" for f in new):
-            self.source.resync()  # two-device capture: re-measure the offset now, not at the next scheduled track
+        slips = [f.value for f in new if f.kind == "device_slip"]
+        if slips:  # two-device capture: re-measure the offset now, near the slip seen, not at the next track
+            self.source.resync(slips[0])
         if (new or cleared) and self.on_change is not None:
             self.on_change(time, new, cleared)
 
     def flush(self) -> None:
         self.source.flush()
 
-    def resync(self) -> None:
-        self.source.resync()
+    def resync(self, slip_samples: float | None = None) -> None:
+        self.source.resync(slip_samples)
 
     def close(self) -> None:
         self.source.close()

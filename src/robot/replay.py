@@ -15,7 +15,7 @@ from pathlib import Path
 import numpy as np
 from scipy.io import wavfile
 
-from robot.hal import AudioBlock, AudioSource, Clock, DriveBase, DriveStatus, WheelOdometry
+from robot.hal import AudioBlock, AudioSource, Clock, DriveBase, DriveStatus, EndOfAudio, WheelOdometry
 from robot.kinematics import OmniDriveParams, forward_kinematics, twist_to_wheels
 
 log = logging.getLogger(__name__)
@@ -141,7 +141,7 @@ class WavFileSource(AudioSource):
         left = self.n_samples - self._pos
         if left < n:
             self._pos = self.n_samples
-            raise EOFError(f"replay recording {self.path}: end reached ({left} samples left, {n} requested)")
+            raise EndOfAudio(f"replay recording {self.path}: end reached ({left} samples left, {n} requested)")
         block = AudioBlock(
             samples=self._samples(self._pos, n),
             sample_rate=self._rate,

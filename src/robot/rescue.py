@@ -53,7 +53,7 @@ from typing import Any
 import numpy as np
 
 from robot.coverage import CoverageConfig, ListeningCoverage
-from robot.hal import AudioSource, Clock, DriveBase, DriveStatus
+from robot.hal import AudioSource, Clock, DriveBase, DriveStatus, EndOfAudio
 from robot.kinematics import OmniDriveParams
 from robot.listening import ListenEvidence, Listener
 from robot.motion import Blocked, Motion, MotionConfig
@@ -327,6 +327,8 @@ class RescueBehaviour:
         self.range_layout = range_layout
         self._scan_pose: np.ndarray | None = None   # where the last range reading went into the grid
         self.listener = Listener(audio, clock, localizer, mics, config.voice_threshold, speech, config.voice_scan_deg)
+        if speech is None and mics is not None:
+            _ = self.listener.vad   # the model files checked now (robot.vad.ModelError), not at the first listen
         self.map = SoundMap(dataclasses.replace(sound_map, array_height_m=config.array_height_m))
         self.grid = OccupancyGrid(occupancy, origin=np.asarray(start_pose, float)[:2])
         self.coverage = ListeningCoverage(self.grid.origin, self.grid.n, self.grid.resolution, coverage)
@@ -369,7 +371,7 @@ class RescueBehaviour:
             return []
         try:
             self._cycle()
-        except EOFError as exc:
+        except EndOfAudio as exc:   # the source's own end of stream (any other EOFError, e.g. a model's, fails)
             self._finish(Decision.AUDIO_ENDED, f"audio source exhausted ({exc})")
         except BaseException as exc:
             failed = self._safe_stop()

@@ -113,6 +113,17 @@ class SoundMapConfig:
     silent_faint_db: float = -54.0
     silent_faint_weight: float = 0.3
     seed: int = 0                          # RANSAC sampling
+    max_table_mb: float = 512.0            # refuse RANSAC tables (hypotheses x rays) that would need more memory
+
+    @property
+    def ransac_table_mb(self) -> float:
+        """Peak memory (MB) of one refit at ``max_rays`` rays: every candidate point (hypotheses, all pairs when
+        fewer, plus one per ray) against every ray. Measured with tracemalloc: 53-63 bytes per (candidate, ray)
+        (the (candidates, rays, 3) vectors of ``_ray_angle`` and their temporaries); 64 taken."""
+        n, h = self.max_rays, self.ransac_hypotheses
+        pairs = n * (n - 1) // 2
+        draws = 4 * h if h < pairs else 0     # random pairs drawn (2 x 4 h int64) when not every pair is tried
+        return 64.0 * (draws / 4 + (min(h, pairs) + n) * n) / 1e6
 
     def __post_init__(self) -> None:
         need(self, self.array_height_m > 0, "array_height_m", "> 0 m")
@@ -132,6 +143,17 @@ class SoundMapConfig:
         need(self, 0 < self.min_range_m < self.max_range_m, "min_range_m", "in (0, max_range_m) m")
         need(self, self.silent_faint_db < self.silent_loud_db, "silent_faint_db", "< silent_loud_db (dB)")
         need(self, 0 <= self.silent_faint_weight <= 1, "silent_faint_weight", "in [0, 1]")
+        need(self, self.seed >= 0, "seed", "an integer >= 0 (numpy's generators take no negative seed)")
+        need(self, self.max_table_mb > 0, "max_table_mb", "> 0 MB")
+        if self.ransac_table_mb > self.max_table_mb:
+            field = "max_rays" if self.max_rays ** 2 * 64 > self.ransac_table_mb * 1e6 / 2 else "ransac_hypotheses"
+            need(self, False, field,
+                 f"a RANSAC table within max_table_mb={self.max_table_mb:g} MB: ransac_hypotheses="
+                 f"{self.ransac_hypotheses} x max_rays={self.max_rays} needs about {_size(self.ransac_table_mb)}")
+
+
+def _size(mb: float) -> str:
+    return f"{mb / 1e6:.1f} TB" if mb >= 1e6 else f"{mb / 1e3:.1f} GB" if mb >= 1e3 else f"{mb:.0f} MB"
 
 
 @dataclass(frozen=True)

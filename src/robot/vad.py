@@ -35,9 +35,12 @@ its leftover samples; all streams with a whole frame pending go through the netw
 """
 from __future__ import annotations
 
-import math
-from dataclasses import dataclass
+import functools
 import gzip
+import math
+import zipfile
+import zlib
+from dataclasses import dataclass
 from pathlib import Path
 
 import numpy as np
@@ -50,14 +53,65 @@ SPLIT_8K_ENCODER_PATH = MODEL_PATH.with_name("silero_vad_8k_encoder.onnx.gz")
 SPLIT_8K_LSTM_PATH = MODEL_PATH.with_name("silero_vad_8k_lstm.npz")
 
 
-def load_model(path: Path | str = MODEL_PATH) -> bytes:
-    """The ONNX model's bytes, from a plain ``.onnx`` file or a gzip-compressed ``.onnx.gz``."""
-    path = Path(path)
+class ModelError(RuntimeError):
+    """A model file that cannot be read, loaded or run; the message names the file and what is wrong."""
+
+    def __init__(self, path: Path | str, problem: str) -> None:
+        super().__init__(f"model file {path}: {problem}")
+        self.path = Path(path)
+
+
+def _why(exc: BaseException) -> str:
+    """One line for an exception of gzip, zipfile, numpy or onnxruntime (their messages can span lines)."""
+    text = " ".join(str(exc).split()) or type(exc).__name__
+    return text if len(text) <= 200 else text[:197] + "..."
+
+
+def load_model(path: Path | str | None = None) -> bytes:
+    """The ONNX model's bytes, from a plain ``.onnx`` file or a gzip-compressed ``.onnx.gz``; ``ModelError``
+    naming the file when it cannot be read, is empty or is not whole gzip (truncated, bit-flipped: gzip's CRC)."""
+    path = Path(MODEL_PATH if path is None else path)
     try:
         data = path.read_bytes()
     except OSError as exc:
-        raise ValueError(f"model_path: cannot read the VAD model {path}: {exc.strerror}") from exc
-    return gzip.decompress(data) if path.suffix == ".gz" else data
+        raise ModelError(path, f"cannot read it ({exc.strerror or exc})") from None
+    if not data:
+        raise ModelError(path, "empty (0 bytes)")
+    if path.suffix != ".gz":
+        return data
+    try:
+        return gzip.decompress(data)
+    except EOFError:
+        raise ModelError(path, f"truncated: the gzip stream ends early ({len(data)} bytes)") from None
+    except (OSError, ValueError, zlib.error) as exc:   # gzip.BadGzipFile is an OSError; CRC mismatches too
+        raise ModelError(path, f"damaged gzip data ({_why(exc)})") from None
+
+
+def _load_lstm(path: Path) -> dict[str, np.ndarray]:
+    """The split net's LSTM cell + output layer weights (``.npz``), checked for the shapes the cell needs."""
+    want = {"weight_hh": (4 * _HIDDEN, _HIDDEN), "out_weight": (_HIDDEN,), "out_bias": ()}
+    try:
+        size = path.stat().st_size
+    except OSError as exc:
+        raise ModelError(path, f"cannot read it ({exc.strerror or exc})") from None
+    if size == 0:
+        raise ModelError(path, "empty (0 bytes)")
+    with open(path, "rb") as f:
+        if f.read(4) != b"PK\x03\x04":
+            raise ModelError(path, "not an .npz archive (no zip header)")
+    try:
+        with np.load(path, allow_pickle=False) as w:
+            arrays = {k: np.asarray(w[k]) for k in want if k in w.files}
+    except (EOFError, OSError, ValueError, KeyError, zipfile.BadZipFile, zlib.error) as exc:  # zip CRC: BadZipFile
+        raise ModelError(path, f"truncated or damaged .npz archive ({_why(exc)})") from None
+    for k, shape in want.items():
+        if k not in arrays:
+            raise ModelError(path, f"no array {k!r} (expected {sorted(want)})")
+        if np.shape(arrays[k]) != shape and not (shape == () and np.size(arrays[k]) == 1):
+            raise ModelError(path, f"{k}: expected shape {shape}, got {np.shape(arrays[k])}")
+        if not np.all(np.isfinite(arrays[k])):
+            raise ModelError(path, f"{k}: holds non-finite values")
+    return arrays
 
 
 SAMPLE_RATE = 16000  # Hz, the default rate (the data set's); 8000 is the other one the model knows
@@ -91,10 +145,11 @@ class SileroVad:
 
     frame_s = FRAME / SAMPLE_RATE  # 32 ms at either rate
 
-    def __init__(self, threads: int = 1, model_path: Path | str = MODEL_PATH, sample_rate: int = SAMPLE_RATE,
+    def __init__(self, threads: int = 1, model_path: Path | str | None = None, sample_rate: int = SAMPLE_RATE,
                  split: bool | None = None) -> None:
         import onnxruntime as ort  # robot's dependency; imported here so ssl_core users never pay for it
 
+        model_path = MODEL_PATH if model_path is None else model_path
         if threads < 1:
             raise ValueError(f"threads: expected >= 1, got {threads}")
         if sample_rate not in _FRAMING:
@@ -111,15 +166,22 @@ class SileroVad:
         # (no / basic / all graph optimisations, memory pattern on or off, thread spinning on or off:
         # the same cost within 3 %; 2 intra-op threads double it: benchmarks/bench_voice.py)
         opts.log_severity_level = 3
-        model = load_model(SPLIT_8K_ENCODER_PATH if self.split else model_path)
-        self._session = ort.InferenceSession(model, opts, providers=["CPUExecutionProvider"])
+        self.model_path = Path(SPLIT_8K_ENCODER_PATH if self.split else model_path)
+        self.lstm_path = Path(SPLIT_8K_LSTM_PATH) if self.split else None
+        model = load_model(self.model_path)
+        try:
+            self._session = ort.InferenceSession(model, opts, providers=["CPUExecutionProvider"])
+        except Exception as exc:   # onnxruntime's own exception types: not an ONNX graph it can run
+            raise ModelError(self.model_path, f"not a loadable ONNX model ({_why(exc)})") from None
         if self.split:
             # sigmoid(x) = (1 + tanh(x / 2)) / 2: the i, f and o gates' pre-activations halved, so that one
             # tanh serves all four gates
             self._half = np.repeat(np.array([0.5, 0.5, 1.0, 0.5], np.float32), _HIDDEN)
-            with np.load(SPLIT_8K_LSTM_PATH) as w:
-                self._w_hh_t = (w["weight_hh"] * self._half[:, None]).T.copy()   # (state 128, 4 gates x 128)
-                self._out_w, self._out_b = w["out_weight"], float(w["out_bias"])
+            w = _load_lstm(self.lstm_path)
+            self._w_hh_t = np.ascontiguousarray((w["weight_hh"] * self._half[:, None]).T,  # (state 128, 4 gates x 128)
+                                                dtype=np.float32)
+            self._out_w = w["out_weight"].astype(np.float32)
+            self._out_b = float(np.ravel(w["out_bias"])[0])
         self.sample_rate = sample_rate
         self.frame, self._context = _FRAMING[sample_rate]
         self._sr = np.array(sample_rate, dtype=np.int64)
@@ -151,7 +213,10 @@ class SileroVad:
             contexts = np.concatenate([np.stack([s.context for s in streams])[:, None], frames[:, :-1, -ctx:]], axis=1)
             inputs = np.concatenate([contexts, frames], axis=2).transpose(1, 0, 2)
             state = np.concatenate([s.state for s in streams], axis=1)
-            probs, states = self._run_split(inputs, state) if self.split else self._run(inputs, state)
+            try:
+                probs, states = self._run_split(inputs, state) if self.split else self._run(inputs, state)
+            except Exception as exc:   # a model failing at run time fails the run: never mistaken for an end of audio
+                raise ModelError(self.model_path, f"failed at run time ({type(exc).__name__}: {_why(exc)})") from exc
             for i, (s, c) in enumerate(zip(streams, counts)):
                 if c:   # the state and context after this stream's last whole frame
                     s.state, s.context = states[c - 1, :, i:i + 1].copy(), inputs[c - 1, i, -ctx:].copy()
@@ -205,3 +270,34 @@ def speech_fraction(probs: np.ndarray) -> float:
     """Fraction of frames called speech (probability >= SPEECH_THRESHOLD); 0 for no frames."""
     p = np.asarray(probs)
     return float((p >= SPEECH_THRESHOLD).mean()) if p.size else 0.0
+
+
+def check_model(sample_rate: int = SAMPLE_RATE) -> SileroVad:
+    """Load the shipped model for ``sample_rate`` (8 kHz: its split net, encoder and LSTM weights) and run it on
+    0.3 s of silence in 4 streams; ``ModelError`` naming the file when it cannot be loaded or gives anything but
+    one probability in [0, 1] per frame. Called where a program starts, before devices open, so that a damaged
+    file stops it at once instead of at its first listen. Cached per file state (path, size, mtime)."""
+    vad_paths = [SPLIT_8K_ENCODER_PATH, SPLIT_8K_LSTM_PATH] if sample_rate == 8000 else [MODEL_PATH]
+    return _checked(sample_rate, tuple((str(p), *_stat(p)) for p in map(Path, vad_paths)))
+
+
+def _stat(path: Path) -> tuple[int, int]:
+    try:
+        st = path.stat()
+    except OSError:
+        return (-1, -1)
+    return (st.st_size, st.st_mtime_ns)
+
+
+@functools.lru_cache(maxsize=8)
+def _checked(sample_rate: int, files: tuple) -> SileroVad:
+    vad = SileroVad(sample_rate=sample_rate)
+    streams = [vad.new_stream() for _ in range(4)]
+    block = np.zeros(int(0.1 * sample_rate), np.float32)
+    probs = [np.concatenate(p) for p in zip(*(vad.process(streams, [block] * 4) for _ in range(3)))]
+    expected = 3 * len(block) // vad.frame
+    for p in probs:
+        if len(p) != expected or not np.all((p >= 0) & (p <= 1)):
+            raise ModelError(vad.model_path, f"gives {p[:4]!r}... on silence: expected {expected} probabilities "
+                                             "in [0, 1] per stream")
+    return vad

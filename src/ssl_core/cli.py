@@ -6,6 +6,9 @@ first). ``--stream``: every window's detections; ``--track``: the confirmed trac
 ``TRACKING_MIN_SIGNIFICANCE``.
 The file is read in blocks, so memory stays bounded whatever its length.
 
+A truncated file (its header declares more samples than it holds) is named on stderr with both lengths, and
+the samples present are processed.
+
 Exit codes: 0 done (also when no source was found: stderr says so); 1 no source found and
 ``--require-source`` given; 2 bad input (file missing, a directory, unreadable, not a WAV, wrong
 channel count, bad ``--array`` or option values; one line on stderr naming the file or option).
@@ -170,6 +173,9 @@ def _run(args) -> int:
     if args.truth is not None and fmt == "odas":
         raise _BadInput("--truth prints scores: use it with the table or --json, not --format odas")
     info = _open(args.wav)
+    if info.truncated:   # processed, but never silently: the user may hold a copy cut short
+        print(f"ssl-locate: warning: {info.truncation()}; processing the {info.duration_s:.3f} s present",
+              file=sys.stderr)
     truth, truth_array = _truth(args, info) if args.truth is not None else (None, None)
     loc = _localizer(args, info.fs)
     blocks = _blocks(info, loc)

@@ -12,7 +12,9 @@ order) and names faults:
 * ``swapped``     the pair delays fit a plane wave only with two channels exchanged (wiring or
                   channel-map error: TDOAs inconsistent with the array geometry);
 * ``device_slip`` (two capture devices) the delays fit a plane wave plus a common offset of the second
-                  device's channels (the devices' streams slipped by ``value`` samples);
+                  device's channels (the devices' streams slipped by ``value`` samples). Slips beyond the pair
+                  delays' search (``max_slip_samples``) are found first by a GCC-PHAT of the two devices' summed
+                  channels over half the window (+-0.5 s by default), then measured on the re-aligned window;
 * ``common_mode`` one sound arrives at every channel at the same instant (zero lag on every pair): no
                   acoustic source can do that to a 3-D array, electrical noise (ground loop, USB) can.
 
@@ -26,6 +28,7 @@ from dataclasses import dataclass, field
 from itertools import combinations
 
 import numpy as np
+import scipy.fft
 
 from ssl_core.gcc_phat import LagSteering, band_bins, frame_spectra, summed_phat_cross_spectra
 from ssl_core.geometry import ArrayGeometry, get_array
@@ -63,6 +66,9 @@ class HealthConfig:
     slip_samples: float = 0.5        # device_slip: fitted offset at least this (samples) ...
     slip_gain: float = 1.8           # ... and the offset cuts the misfit this many times (1 sample: 2.3-3.6x)
     max_slip_samples: int = 8        # delays searched beyond the geometric range (samples)
+    coarse_slip_gain: float = 2.0    # a slip beyond that: the devices' GCC-PHAT peak outside +-(geometric delay +
+                                     # max_slip_samples) at least this x the one inside (talkers in a room, slips of
+                                     # 80-2000 samples: 2.5-19x; healthy 0.3-0.45x; sensor noise alone 1.2-1.5x)
     common_mode_peak: float = 0.25   # common_mode: every pair's GCC-PHAT at lag 0 at least this (noise 6 dB
                                      # under the talker: 0.47-0.52; a real source leaves some pairs near 0)
     sound_speed: float = SOUND_SPEED
@@ -77,7 +83,10 @@ class HealthConfig:
         need(self.window_s * self.fs >= 4 * self.frame_size, "window_s", "at least 4 frames of audio")
         need(0 < self.band_hz[0] < self.band_hz[1] <= self.fs / 2, "band_hz", f"0 < low < high <= {self.fs / 2:g} Hz")
         need(0 < self.clip_fraction < 1, "clip_fraction", "a fraction in (0, 1)")
-        need(self.max_slip_samples >= 1, "max_slip_samples", "an integer >= 1")
+        # its lag table grows with it (bins x lags); larger slips are the coarse search's (_coarse_slip)
+        need(1 <= self.max_slip_samples <= self.frame_size // 4, "max_slip_samples",
+             f"an integer in [1, frame_size / 4 = {self.frame_size // 4}]")
+        need(self.coarse_slip_gain > 1, "coarse_slip_gain", "a ratio > 1")
 
 
 @dataclass(frozen=True)
@@ -135,6 +144,7 @@ class MicHealth:
         self._lags = np.arange(-np.ceil(span * 8), np.ceil(span * 8) + 1) / (8 * cfg.fs)  # 1/8 sample steps (s)
         self._steer = LagSteering(omega, self._lags, dtype=np.float64)
         self._ms_scale = 2.0 / (cfg.frame_size * np.sum(self._window**2))
+        self._near = int(np.ceil(span))  # samples: a device offset within this is the pair delays' to measure
         self.reset()
 
     def reset(self) -> None:
@@ -208,10 +218,52 @@ class MicHealth:
         if active.sum() < 4:
             return faults
         spec = spec[:, active]
+        coarse = self._coarse_slip(x, bad) if self.devices is not None else 0
+        if coarse:
+            # The devices slipped further than the pair delays are searched: measure on the re-aligned window.
+            spec = self._aligned_spectra(x - dc[:, None], coarse)
         coherent = self._coherence_faults(spec, bad, faults)
         if coherent:  # delays and signs mean nothing without one coherent sound (e.g. sensor noise only)
-            faults += self._delay_faults(spec, bad)
+            faults += self._delay_faults(spec, bad, coarse)
         return faults
+
+    def _coarse_slip(self, x: np.ndarray, bad: np.ndarray) -> int:
+        """Samples by which the other devices' channels lag device ``devices[0]``'s, when that is beyond the
+        pair delays' search (else 0): the GCC-PHAT of the two devices' summed PHAT-normalised channel spectra
+        (the sum over all cross-device pairs, at the cost of one product), over +-half the window."""
+        cfg = self.config
+        first = (self.devices == self.devices[0]) & ~bad
+        other = (self.devices != self.devices[0]) & ~bad
+        if not (first.any() and other.any()):
+            return 0
+        n = x.shape[1]
+        half = n // 2
+        nfft = scipy.fft.next_fast_len(n + half + 1)   # lags up to +-half without circular wrap-around
+        spec = scipy.fft.rfft(x - x.mean(axis=1, keepdims=True), nfft, axis=1)
+        f = np.fft.rfftfreq(nfft, 1.0 / cfg.fs)
+        band = (f >= cfg.band_hz[0]) & (f <= cfg.band_hz[1])
+        u = np.where(band, spec / np.maximum(np.abs(spec), 1e-30), 0)
+        cc = scipy.fft.irfft(u[first].sum(axis=0) * np.conj(u[other].sum(axis=0)), nfft)
+        lags = np.r_[np.arange(half + 1), np.arange(-half, 0)]
+        mag = np.abs(np.r_[cc[:half + 1], cc[-half:]])
+        near = np.abs(lags) <= self._near
+        k = int(np.argmax(np.where(near, -1.0, mag)))
+        if mag[k] < cfg.coarse_slip_gain * mag[near].max():
+            return 0
+        return -int(lags[k])   # a positive lag of this product: device 0 late; the slip is the other's lateness
+
+    def _aligned_spectra(self, x: np.ndarray, slip: int) -> np.ndarray:
+        """Frame spectra (active frames) of ``x`` with the other devices' channels moved ``slip`` samples earlier."""
+        cfg = self.config
+        n = x.shape[1] - abs(slip)
+        other = self.devices != self.devices[0]
+        y = np.empty((x.shape[0], n))
+        a, b = (0, slip) if slip > 0 else (-slip, 0)
+        y[~other], y[other] = x[~other, a:a + n], x[other, b:b + n]
+        spec = frame_spectra(y, cfg.frame_size, cfg.frame_size // 2, self._window)[..., self._bins]
+        power = (spec.real**2 + spec.imag**2).sum(axis=-1) * self._ms_scale
+        med_frame = 10 * np.log10(np.maximum(np.median(power, axis=0), 1e-30) / 0.5)
+        return spec[:, med_frame >= cfg.min_level_dbfs]
 
     def _coherence_faults(self, spec: np.ndarray, bad: np.ndarray, out: list[Fault]) -> bool:
         """Magnitude-squared coherence per pair, averaged over the band; appends channels far below the
@@ -236,8 +288,9 @@ class MicHealth:
             bad[c] = True
         return True
 
-    def _delay_faults(self, spec: np.ndarray, bad: np.ndarray) -> list[Fault]:
-        """Polarity, common mode, device slip and swapped channels from the pair GCC-PHATs."""
+    def _delay_faults(self, spec: np.ndarray, bad: np.ndarray, coarse: int = 0) -> list[Fault]:
+        """Polarity, common mode, device slip and swapped channels from the pair GCC-PHATs; ``coarse``: samples
+        the other devices' channels were moved earlier in ``spec`` (a slip found by ``_coarse_slip``)."""
         cfg = self.config
         cross = summed_phat_cross_spectra(spec, self.pairs) / spec.shape[1]
         gcc = self._steer(cross)                               # (pairs, lags), 1 = perfectly coherent
@@ -272,11 +325,16 @@ class MicHealth:
         self._resid = base
         if self.devices is not None:
             slipped, delta = self._fit(tdoa, weight, use, with_offset=True)
-            if abs(delta) * cfg.fs >= cfg.slip_samples and slipped <= cfg.max_fit_residual_s \
-                    and base >= cfg.slip_gain * slipped:
+            # re-aligned by a coarse slip: the delays fitting the geometry confirm it (the fit then measures
+            # what is left of it); else a slip needs a fitted offset that explains the misfit
+            small = abs(delta) * cfg.fs >= cfg.slip_samples and base >= cfg.slip_gain * slipped
+            if slipped <= cfg.max_fit_residual_s and (coarse or small):
+                value = coarse + delta * cfg.fs
                 out.append(Fault("device_slip", tuple(int(c) for c in np.flatnonzero(self.devices != self.devices[0])),
-                                 float(delta * cfg.fs), f"device 1 is {delta * cfg.fs:+.1f} samples off device 0"))
+                                 float(value), f"device 1 is {value:+.1f} samples off device 0"))
                 return out
+            if coarse:
+                return out  # re-aligned delays that fit nothing: no conclusion on slips or swaps from this window
         if base <= cfg.max_fit_residual_s:
             return out
         best = (base, None)

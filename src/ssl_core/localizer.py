@@ -151,6 +151,22 @@ class LocalizerConfig:
                  "too coarse to separate sources this close; lower coarse_resolution_deg")
 
 
+def check_table_memory(cfg: LocalizerConfig, n_pairs: int) -> float:
+    """The steering tables' memory (MB) for ``n_pairs`` microphone pairs: the fine grid's share of the sphere
+    times its density; ValueError naming ``resolution_deg`` when above ``max_table_mb``. Callers that know the
+    array (a scenario: the cube's 28 pairs) check at validation, before anything is built."""
+    el_min, el_max = np.deg2rad(cfg.el_min_deg), np.deg2rad(cfg.el_max_deg)
+    n_fine = n_points_for_spacing(np.deg2rad(cfg.resolution_deg)) * (np.sin(el_max) - np.sin(el_min)) / 2
+    need_mb = n_fine * n_pairs * _TABLE_BYTES_PER_POINT_PAIR / 1e6
+    if need_mb > cfg.max_table_mb:
+        raise ValueError(
+            f"LocalizerConfig.resolution_deg={cfg.resolution_deg:g}: the fine grid has about {n_fine:.0f} "
+            f"points, its steering tables need about {need_mb:.0f} MB, more than max_table_mb="
+            f"{cfg.max_table_mb:g}; use a coarser resolution (memory grows as 1/resolution^2) or raise "
+            "max_table_mb")
+    return need_mb
+
+
 @dataclass(frozen=True)
 class LocalizationResult:
     """Detections (strongest first) of one analysis window ending at ``time`` (s from stream start)."""
@@ -199,14 +215,7 @@ class Localizer:
 
         el_min, el_max = np.deg2rad(cfg.el_min_deg), np.deg2rad(cfg.el_max_deg)
         coarse_sp, fine_sp = np.deg2rad(cfg.coarse_resolution_deg), np.deg2rad(cfg.resolution_deg)
-        # Check the memory before building anything: the grid's share of the sphere times its density.
-        n_fine = n_points_for_spacing(fine_sp) * (np.sin(el_max) - np.sin(el_min)) / 2
-        need_mb = n_fine * len(self.pairs) * _TABLE_BYTES_PER_POINT_PAIR / 1e6
-        if need_mb > cfg.max_table_mb:
-            raise ValueError(
-                f"LocalizerConfig.resolution_deg={cfg.resolution_deg:g}: the fine grid has about {n_fine:.0f} "
-                f"points, its steering tables need about {need_mb:.0f} MB, more than max_table_mb="
-                f"{cfg.max_table_mb:g}; use a coarser resolution (memory grows as 1/resolution^2) or raise max_table_mb")
+        check_table_memory(cfg, len(self.pairs))   # before building anything
         self.coarse_grid: SphericalGrid = make_grid(coarse_sp, el_min, el_max, cfg.radius_m)
         self.fine_grid: SphericalGrid = make_grid(fine_sp, el_min, el_max, cfg.radius_m)
 

@@ -25,11 +25,25 @@ class WavInfo:
     bits: int
     is_float: bool
     data_offset: int      # bytes from the file start
-    n_frames: int         # samples per channel
+    n_frames: int         # samples per channel present in the file (what is read)
+    header_frames: int | None = None  # samples per channel the header declares (None: not stated, e.g. RF64)
 
     @property
     def duration_s(self) -> float:
         return self.n_frames / self.fs
+
+    @property
+    def truncated(self) -> bool:
+        """The header declares more samples than the file holds (a copy or recording cut short)."""
+        return self.header_frames is not None and self.header_frames > self.n_frames
+
+    def truncation(self) -> str:
+        """One line naming the file, the length its header declares and the length present ('' if whole)."""
+        if not self.truncated:
+            return ""
+        return (f"{self.path}: truncated: the header says {self.header_frames / self.fs:.3f} s "
+                f"({self.header_frames} samples per channel), the file holds {self.duration_s:.3f} s "
+                f"({self.n_frames})")
 
 
 def wav_info(path: str | Path) -> WavInfo:
@@ -68,8 +82,11 @@ def wav_info(path: str | Path) -> WavInfo:
                 offset = f.tell()
                 f.seek(0, 2)
                 available = f.tell() - offset
-                n = min(size, available) // (channels * bits // 8)  # a truncated file keeps its whole frames
-                return WavInfo(path, fs, channels, bits, is_float, offset, n)
+                frame_bytes = channels * bits // 8
+                n = min(size, available) // frame_bytes  # a truncated file keeps its whole frames
+                # 0xFFFFFFFF: length not stated in this field (RF64's ds64 chunk, streamed recordings)
+                declared = None if size == 0xFFFFFFFF else size // frame_bytes
+                return WavInfo(path, fs, channels, bits, is_float, offset, n, declared)
             else:
                 f.seek(size + size % 2, 1)
 

@@ -23,26 +23,50 @@ from ssl_core.version import version
 # a Ctrl-C meanwhile must already find the handler of main() (see robot.interrupt).
 
 
+def _checked_models() -> None:
+    """The robot's model files loaded and run on silence before anything is simulated or written; a bad one is
+    refused like a bad option (exit code 2, the message names the file)."""
+    from robot.hearing import VAD_RATE
+    from robot.vad import ModelError, check_model
+
+    try:
+        check_model(VAD_RATE)
+    except ModelError as exc:
+        raise ValueError(str(exc)) from None
+
+
 def _run(args: argparse.Namespace) -> int:
-    from ssl_sim.runner import check_output_dir, format_summary, run_scenario
+    from contextlib import ExitStack
+
+    from ssl_sim.runner import format_summary, output_dir, run_scenario
     from ssl_sim.scenario import load_scenario
     from ssl_sim.viz import parse_rerun_target
 
     sc = load_scenario(args.scenario)
+    for option, name, value in (("--seed", "seed", args.seed), ("--time-limit", "time_limit_s", args.time_limit)):
+        try:
+            sc.with_overrides(**{name: value})
+        except ValueError as exc:
+            raise ValueError(str(exc).replace(name, option, 1)) from None
+    _checked_models()
     seed = args.seed if args.seed is not None else sc.seed
     out = Path(args.out) if args.out else Path("out") / "runs" / f"{sc.name}_seed{seed}"
-    # Fail now, not after the whole simulation.
-    check_output_dir(out, "--out")
-    if args.rerun:
-        mode, arg = parse_rerun_target(args.rerun)
-        if mode == "save":
-            check_output_dir(Path(arg).parent, "--rerun save:")
-    result = run_scenario(sc, seed=args.seed, time_limit_s=args.time_limit, rerun=args.rerun, out_dir=out,
-                          progress=not args.quiet)
+    with ExitStack() as made:   # outputs checked now, not after the whole simulation; removed if it is refused
+        made.enter_context(output_dir(out, "--out"))
+        if args.rerun:
+            mode, arg = parse_rerun_target(args.rerun)
+            if mode == "save":
+                made.enter_context(output_dir(Path(arg).parent, "--rerun save:"))
+        result = run_scenario(sc, seed=args.seed, time_limit_s=args.time_limit, rerun=args.rerun, out_dir=out,
+                              progress=not args.quiet)
     say = sys.stderr if args.json else sys.stdout  # with --json, stdout carries the JSON line alone
     print(format_summary(result), file=say)
     print(f"wrote {out / 'results.json'}" + (f" and {result['rerun_file']}" if result.get("rerun_file") else ""),
           file=say)
+    if result.get("failure"):
+        print(f"ssl-rescue: error: the run failed ({result['end_reason']}): {result['failure']['error']}",
+              file=sys.stderr)
+        return 1
     if args.json:
         print(json.dumps({k: result[k] for k in ("scenario", "seed", "n_found", "n_victims", "sim_time_s",
                                                   "path_length_m", "collisions", "spl")}))
@@ -50,15 +74,16 @@ def _run(args: argparse.Namespace) -> int:
 
 
 def _sweep(args: argparse.Namespace) -> int:
-    from ssl_sim.runner import check_output_dir
+    from ssl_sim.runner import output_dir
     from ssl_sim.sweep import markdown_table, parse_seeds, run_sweep, summarize, write_tables
 
     seeds = parse_seeds(args.seeds)
-    check_output_dir(args.out, "--out")  # now, not after the whole sweep
-    rows = run_sweep(args.scenarios, seeds, cluster=args.cluster, workers=args.workers,
-                     time_limit_s=args.time_limit, progress=not args.quiet)
-    tables = summarize(rows)
-    paths = write_tables(rows, tables, args.out)
+    _checked_models()
+    with output_dir(args.out, "--out"):  # checked now, not after the whole sweep; removed again if it is refused
+        rows = run_sweep(args.scenarios, seeds, cluster=args.cluster, workers=args.workers,
+                         time_limit_s=args.time_limit, progress=not args.quiet)
+        tables = summarize(rows)
+        paths = write_tables(rows, tables, args.out)
     print(markdown_table(tables["scenarios"]))
     print(markdown_table(tables["victims"]))
     print("wrote " + ", ".join(str(p) for p in paths.values()))
@@ -73,6 +98,9 @@ def _record(args: argparse.Namespace) -> int:
     truth = record_scenario(load_scenario(args.scenario), args.out, seed=args.seed, duration_s=args.duration,
                             pose=pose)
     out = Path(args.out)
+    if truth["interrupted"]:
+        print(f"ssl-rescue: interrupted: recorded {truth['duration_s']:.2f} of {args.duration:g} s",
+              file=sys.stderr)
     print(f"wrote {out} ({truth['n_channels']} channels, {truth['duration_s']:.2f} s at {truth['fs']} Hz, int16) "
           f"and {out.with_suffix('.json')} (truth every {truth['frame_s']} s, array frame)")
     for s in truth["sources"]:
@@ -83,7 +111,7 @@ def _record(args: argparse.Namespace) -> int:
     print(f"room RT60 at 1 kHz: {rt['simulated'][k]:.2f} s simulated (the scene's materials alone: "
           f"{rt['scene_materials'][k]:.2f} s)")
     print(f"try: ssl-locate {out} --array cube8 --sources {max(1, len(truth['sources']))}")
-    return 0
+    return 130 if truth["interrupted"] else 0
 
 
 def _list(args: argparse.Namespace) -> int:
@@ -151,13 +179,14 @@ def build_parser() -> argparse.ArgumentParser:
 def main(argv: list[str] | None = None) -> int:
     try:
         # Ctrl-C is raised at check points only, never inside an import (robot.interrupt): here at the end of
-        # parsing (which imports the scenarios), in ``run`` at every simulated tick. ``sweep`` and ``record`` have
-        # no check points and keep Python's immediate KeyboardInterrupt (a sweep's workers get the Ctrl-C too).
+        # parsing (which imports the scenarios), in ``run`` at every simulated tick, in ``record`` at every audio
+        # block (the recording so far is kept). ``sweep`` has no check points and keeps Python's immediate
+        # KeyboardInterrupt (a sweep's workers get the Ctrl-C too).
         with deferred_sigint():
             args = build_parser().parse_args(argv)
             logging.basicConfig(level=logging.WARNING, format="%(levelname)s %(name)s: %(message)s")
-            if args.func is _run:
-                return _run(args)
+            if args.func in (_run, _record):
+                return args.func(args)
         return args.func(args)
     except (ValueError, FileNotFoundError) as exc:  # ScenarioError is a ValueError
         print(f"ssl-rescue: error: {exc}", file=sys.stderr)

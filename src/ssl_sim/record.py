@@ -18,11 +18,15 @@ from __future__ import annotations
 
 import json
 import math
+import os
+import tempfile
+import wave
 from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
-from scipy.io import wavfile
+
+from robot.interrupt import check_interrupt
 
 from ssl_sim.acoustics.materials import OCTAVE_CENTERS_HZ
 from ssl_sim.backends import array_frame_directions
@@ -46,16 +50,52 @@ def parse_pose(text: str) -> tuple[float, float, float]:
     return vals  # type: ignore[return-value]
 
 
+def check_record_paths(out_wav: str | Path, out_json: str | Path | None = None,
+                       what: str = "--out") -> tuple[Path, Path]:
+    """The WAV and truth JSON paths (JSON default: the WAV's name with ``.json``), checked before recording: a
+    file name (not '' nor a directory), the two names distinct, and their folder writable (or creatable: the
+    nearest existing ancestor is a writable directory). Nothing is created. ValueError naming ``what``."""
+    text = str(out_wav)
+    if not text.strip():
+        raise ValueError(f"{what}: expected a WAV file name, e.g. rec.wav, got {text!r}")
+    wav = Path(text)
+    if wav.is_dir() or text.endswith(("/", os.sep)):
+        raise ValueError(f"{what} {text}: is a directory; expected a WAV file name, e.g. {wav / 'rec.wav'}")
+    truth = Path(out_json) if out_json is not None else wav.with_suffix(".json")
+    if truth.absolute() == wav.absolute():
+        raise ValueError(f"{what} {text}: the truth JSON is written to the WAV's name with .json, which is this "
+                         "name: the JSON would overwrite the recording; give a .wav name, e.g. "
+                         f"{wav.with_suffix('.wav')}")
+    if truth.is_dir():
+        raise ValueError(f"{what} {text}: the truth JSON's name {truth} is a directory")
+    folder = wav.absolute().parent
+    existing = next(d for d in (folder, *folder.parents) if d.exists())
+    if not existing.is_dir():
+        raise ValueError(f"{what} {text}: cannot write there: {existing} is a file, not a directory")
+    try:
+        with tempfile.TemporaryFile(dir=existing, prefix=".write-test-"):
+            pass
+    except OSError as exc:
+        raise ValueError(f"{what} {text}: cannot write in {existing} ({exc.strerror or exc})") from None
+    return wav, truth
+
+
 def record_scenario(scenario: Scenario, out_wav: str | Path, seed: int | None = None, duration_s: float = 10.0,
                     pose: tuple[float, float, float] | None = None, frame_s: float = TRUTH_FRAME_S,
                     out_json: str | Path | None = None) -> dict:
     """Record ``duration_s`` of the scenario's sound at the robot's microphones, standing at ``pose``
     (x, y, yaw; default the scenario's start). Writes ``out_wav`` (int16, one channel per microphone)
-    and ``out_json`` (default: ``out_wav`` with suffix ``.json``); returns the truth dict."""
+    and ``out_json`` (default: ``out_wav`` with suffix ``.json``); returns the truth dict.
+
+    The paths are checked before anything is simulated (``check_record_paths``). The audio streams to disk
+    block by block (memory does not grow with the duration). A Ctrl-C (KeyboardInterrupt, raised at the block
+    boundaries under ``robot.interrupt.deferred_sigint``) ends the recording early: the WAV and JSON then hold
+    what was recorded, ``truth["interrupted"]`` is True (nothing is written when no block was recorded)."""
     if not (isinstance(duration_s, (int, float)) and math.isfinite(duration_s) and duration_s > 0):
         raise ValueError(f"--duration: expected a duration > 0 s, got {duration_s!r}")
     if not frame_s > 0:
         raise ValueError(f"frame_s: expected > 0 s, got {frame_s}")
+    out_wav, out_json = check_record_paths(out_wav, out_json)
     sc = scenario.with_overrides(seed=seed)
     if pose is not None:
         sc = replace(sc, robot_start=tuple(float(v) for v in pose))
@@ -65,34 +105,52 @@ def record_scenario(scenario: Scenario, out_wav: str | Path, seed: int | None = 
         raise ScenarioError(str(exc).replace("robot.start", "--pose" if pose is not None else "robot.start")) from None
     hal = sc.hal(sc.seed, world=world)
     fs = hal.audio.sample_rate
+    n_ch = hal.audio.n_channels
     n_total = int(round(duration_s * fs))
-    blocks, poses = [], []
+    poses = []
     hal.drive.stop()
     done = 0
-    while done < n_total:
-        n = min(int(round(_BLOCK_S * fs)), n_total - done)
-        blocks.append(hal.audio.read(n).samples)
-        poses.append((done, n, hal.audio.last_array_poses))
-        done += n
-    audio = np.concatenate(blocks, axis=1)
-    hal.close()
-    if audio.dtype != np.int16:
-        audio = np.clip(np.round(np.asarray(audio, float) * 32768.0), -32768, 32767).astype(np.int16)
-    out_wav = Path(out_wav)
+    interrupted = False
     out_wav.parent.mkdir(parents=True, exist_ok=True)
-    wavfile.write(out_wav, fs, np.ascontiguousarray(audio.T))
+    partial = out_wav.with_name(f".{out_wav.name}.partial")   # the finished file replaces any old one at once
+    try:
+        with wave.open(str(partial), "wb") as w:
+            w.setnchannels(n_ch)
+            w.setsampwidth(2)
+            w.setframerate(fs)
+            try:
+                while done < n_total:
+                    check_interrupt()
+                    n = min(int(round(_BLOCK_S * fs)), n_total - done)
+                    block = hal.audio.read(n).samples
+                    poses.append((done, n, hal.audio.last_array_poses))
+                    if block.dtype != np.int16:
+                        block = np.clip(np.round(np.asarray(block, float) * 32768.0), -32768, 32767)
+                    w.writeframes(np.ascontiguousarray(block.T, dtype="<i2").tobytes())
+                    done += n
+            except KeyboardInterrupt:
+                if not done:
+                    raise
+                interrupted = True
+    except BaseException:
+        partial.unlink(missing_ok=True)
+        raise
+    finally:
+        hal.close()
+    os.replace(partial, out_wav)
 
-    truth = _truth(hal, poses, fs, n_total, frame_s)
+    truth = _truth(hal, poses, fs, done, frame_s)
     truth["rt60_s"] = {  # Eyring, per octave band: what the simulation used and what the scene's materials give
         "octave_hz": list(OCTAVE_CENTERS_HZ),
         "simulated": np.round(hal.acoustics.rt60_bands, 3).tolist(),
         "scene_materials": np.round(hal.acoustics.scene_materials_rt60(), 3).tolist(),
     }
-    truth.update(wav=out_wav.name, fs=fs, n_channels=int(audio.shape[0]), duration_s=n_total / fs,
+    truth.update(wav=out_wav.name, fs=fs, n_channels=n_ch, duration_s=done / fs, interrupted=interrupted,
                  scenario=sc.name, seed=sc.seed, robot_start={"x": world.robot_start[0], "y": world.robot_start[1],
                                                              "yaw_rad": world.robot_start[2]})
-    out_json = Path(out_json) if out_json is not None else out_wav.with_suffix(".json")
-    out_json.write_text(json.dumps(truth, indent=1))
+    tmp = out_json.with_name(f".{out_json.name}.partial")
+    tmp.write_text(json.dumps(truth, indent=1))
+    os.replace(tmp, out_json)
     return truth
 
 
@@ -119,8 +177,12 @@ def _truth(hal, poses, fs: int, n_total: int, frame_s: float) -> dict:
         for f, k in enumerate(nearest):
             a, e, d = array_frame_directions(origins[k], rots[k], pos[None])
             az[f], el[f], dist[f] = a[0], e[0], d[0]
-        sig = src.signal.render(0, int(starts[-1] + nf))
-        rms = np.sqrt(np.mean(sig.reshape(len(starts), nf) ** 2, axis=1))
+        # the source signal's RMS per frame, rendered 10 s at a time (an hour at once: 460 MB per source)
+        rms = np.empty(len(starts))
+        step = max(1, int(10 * fs) // nf)
+        for c in range(0, len(starts), step):
+            m = min(step, len(starts) - c)
+            rms[c:c + m] = np.sqrt(np.mean(src.signal.render(int(starts[c]), m * nf).reshape(m, nf) ** 2, axis=1))
         sounding = rms > 10 ** (SOUNDING_THRESHOLD_DB / 20)
         level = src.level_db_spl - 20 * np.log10(dist)
         out.append({

@@ -35,6 +35,8 @@ import math
 import os
 import tempfile
 import time
+from collections.abc import Iterator
+from contextlib import contextmanager
 from dataclasses import asdict, replace
 from pathlib import Path
 from typing import Any
@@ -47,6 +49,7 @@ from robot.odometry import Odometry, wrap_angle
 from robot.ranging import RangeLayout, ray_ends
 from robot.monitored_audio import MonitoredAudio
 from robot.rescue import Decision, RescueBehaviour, RescueEvent
+from robot.vad import ModelError
 from ssl_core.geometry import cube8
 from ssl_core.health import HealthConfig, MicHealth
 from ssl_core.localizer import Localizer
@@ -235,6 +238,7 @@ class RescueRun:
         self.events: list[RescueEvent] = []
         self._last_block: tuple[int, int] | None = None
         self._ticks = 0
+        self.failure: dict[str, str] | None = None   # what failed, when a part of the robot ended the run
         self.setup_s = time.perf_counter() - t0
         self._record_pose()
 
@@ -420,7 +424,12 @@ class RescueRun:
                     break
                 if self.clock.now() >= sc.time_limit_s:
                     break
-                self._handle_events(self.behaviour.step())
+                try:
+                    self._handle_events(self.behaviour.step())
+                except ModelError as exc:   # the run failed (the drive is stopped): said so, never "audio ended"
+                    self.failure = {"part": "model", "file": str(exc.path), "error": str(exc)}
+                    end_reason = "failed_model"
+                    break
                 if self.logger.enabled:
                     self._log_map()
                 if bar is not None:
@@ -485,7 +494,8 @@ class RescueRun:
             "scenario": sc.name, "scenario_file": sc.path, "seed": self.seed, "scene": self.world.name,
             "description": sc.description,
             "n_victims": self.n_victims, "n_found": len(self.found), "success": len(self.found) == self.n_victims,
-            "end_reason": end_reason, "time_limit_s": sc.time_limit_s, "sim_time_s": _r(sim_t, 2),
+            "end_reason": end_reason, "failure": self.failure, "time_limit_s": sc.time_limit_s,
+            "sim_time_s": _r(sim_t, 2),
             "success_radius_m": sc.success_radius_m,
             "victims": victims, "false_positives": self.false_positives,
             "spl": _r(float(np.mean([v["spl"] for v in victims])) if victims else 0.0, 4),
@@ -534,6 +544,24 @@ def check_output_dir(path: str | Path, what: str = "out_dir") -> Path:
     except OSError as exc:
         raise OutputPathError(f"{what} {p}: cannot write there ({exc.strerror or exc})") from None
     return p
+
+
+@contextmanager
+def output_dir(path: str | Path, what: str = "out_dir") -> Iterator[Path]:
+    """``check_output_dir`` for the body's outputs; when the body raises (a refused or failed run), the
+    directories made here are removed again while still empty, so that a refused run leaves nothing behind."""
+    p = Path(path)
+    new = [d for d in (p, *p.parents) if not d.exists()]   # deepest first
+    check_output_dir(p, what)
+    try:
+        yield p
+    except BaseException:
+        for d in new:
+            try:
+                d.rmdir()
+            except OSError:   # not empty (the run wrote something) or gone: keep the rest
+                break
+        raise
 
 
 def write_results(result: dict, out_dir: str | Path, name: str = "results.json") -> Path:

@@ -58,7 +58,7 @@ from typing import Any
 
 import numpy as np
 
-from robot.config_values import check_scalar, field_values
+from robot.config_values import check_scalar, field_values, in_section
 from robot.motion import MotionConfig
 from robot.coverage import CoverageConfig
 from robot.occupancy import OccupancyConfig
@@ -66,7 +66,8 @@ from robot.planner import PlannerConfig
 from robot.rescue import RescueConfig
 from robot.sound_map import SoundMapConfig
 from ssl_core.gcc_phat import band_bins
-from ssl_core.localizer import LocalizerConfig
+from ssl_core.geometry import cube8
+from ssl_core.localizer import LocalizerConfig, check_table_memory
 from ssl_sim.acoustics import AcousticConfig, AmbientNoise, SoundSource, noise_source
 from ssl_sim.acoustics.signals import LoopedSignal
 from ssl_sim.acoustics.sources import PAPER_LEVEL_DB_SPL
@@ -273,9 +274,23 @@ def _where(path: str) -> str:
     return f"{Path(path).name}: " if path else ""
 
 
+#: The run's truth grid (``ssl_sim.runner.FreeSpacePaths``: 5 cm cells of the free floor, 16-connected, for the
+#: shortest paths of the score): tracemalloc peak 265-531 bytes per cell on the shipped scenes (more free floor,
+#: more edges); 600 taken. Rooms needing more than ``MAX_TRUTH_GRID_MB`` are refused when the world is built.
+TRUTH_GRID_BYTES_PER_CELL = 600
+MAX_TRUTH_GRID_MB = 2048.0
+
+
 def _check_world(world: World, sc: Scenario, where: str) -> None:
-    """Victims in air, in the room, apart from the start; the start on free floor; all reachable."""
+    """The room's truth grid within memory; victims in air, in the room, apart from the start; the start on free
+    floor; all reachable."""
     room = world.room
+    cells = math.ceil(room.size[0] / 0.05) * math.ceil(room.size[1] / 0.05)
+    need_mb = cells * TRUTH_GRID_BYTES_PER_CELL / 1e6
+    if need_mb > MAX_TRUTH_GRID_MB:
+        raise ScenarioError(f"{where}scene room.size: {room.size[0]:g} x {room.size[1]:g} m: the run's free-space "
+                            f"grid (5 cm cells, for the score's shortest paths) has {cells} cells and needs about "
+                            f"{need_mb:.0f} MB, more than {MAX_TRUTH_GRID_MB:g} MB")
     x, y, yaw = world.robot_start
     if not room.contains([x, y, 1.0], margin=0.2):
         raise ScenarioError(f"{where}robot.start: ({x}, {y}) is outside the room {list(room.size)} "
@@ -428,7 +443,7 @@ def parse_scenario(data: dict, base_dir: str | Path = ".", path: str = "") -> Sc
     try:
         AcousticConfig(**acoustics)
     except ValueError as exc:
-        raise err(f"acoustics: {exc}") from None
+        raise err(in_section(str(exc), AcousticConfig, "acoustics")) from None
     localizer = _dataclass(LocalizerConfig, _table(data, "localizer", where), "localizer", where)
     _check_localizer(localizer, AcousticConfig(**acoustics).fs, where)
     beh = dict(_table(data, "behaviour", where))
@@ -456,6 +471,10 @@ def _check_localizer(cfg: LocalizerConfig, audio_fs: int, where: str) -> None:
         band_bins(cfg.fs, cfg.frame_size, cfg.band_hz)
     except ValueError as exc:
         raise ScenarioError(f"{where}localizer.band_hz: {exc}") from None
+    try:   # the simulated robot's cube: its steering tables' memory, estimated before anything is built
+        check_table_memory(cfg, len(cube8().pairs))
+    except ValueError as exc:
+        raise ScenarioError(f"{where}{in_section(str(exc), LocalizerConfig, 'localizer')}") from None
 
 
 def _scene(t: dict, base_dir: Path, where: str) -> SceneSpec:
@@ -640,5 +659,5 @@ def _dataclass(cls, t: dict, what: str, where: str):
     kwargs = _typed_kwargs(cls, t, what, where)
     try:
         return cls(**kwargs)
-    except (ValueError, TypeError) as exc:
-        raise ScenarioError(f"{where}{what}: {exc}") from None
+    except (ValueError, TypeError) as exc:   # "Class.field=..." named as the file's "section.field=..."
+        raise ScenarioError(f"{where}{in_section(str(exc), cls, what)}") from None

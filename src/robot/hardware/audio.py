@@ -28,6 +28,7 @@ imported lazily).
 from __future__ import annotations
 
 import logging
+import math
 import queue
 import re
 import threading
@@ -290,20 +291,22 @@ class ChannelMerger:
         """Use ``offset`` samples (device-1 index minus device-0 index) from the next pop on."""
         self.offset = int(offset)
 
-    def estimate_offset(self, window_s: float = 0.5, search_s: float | None = None) -> OffsetEstimate:
+    def estimate_offset(self, window_s: float = 0.5, search_s: float | None = None,
+                        centre: int | None = None) -> OffsetEstimate:
         """Measure the offset on the most recent ``window_s`` of buffered audio of both devices.
 
         ``search_s``: how far from the current offset to search (default
         ``max_offset_s``; a few ms is enough to track drift). Does not apply the
-        result; see ``calibrate``.
+        result; see ``calibrate``. ``centre``: search around this offset instead of the current one.
         """
         cfg = self.config
+        k = self.offset if centre is None else int(centre)
         search = cfg.max_offset_s if search_s is None else float(search_s)
         L = int(round(window_s * self.fs))
         m = int(np.ceil(search * self.fs))
         # Device-0 window [a, a+L); device-1 window extended by m on both sides around the current offset.
-        a = min(self._end(0) - L, self._end(1) - self.offset - L - m)
-        if L < 64 or a < self._start[0] or a + self.offset - m < self._start[1]:
+        a = min(self._end(0) - L, self._end(1) - k - L - m)
+        if L < 64 or a < self._start[0] or a + k - m < self._start[1]:
             have = min(self._end(0) - self._start[0], self._end(1) - self._start[1]) / self.fs
             raise ValueError(
                 f"window_s: need {window_s} s (+{2 * search:g} s search) of audio from both devices for the offset "
@@ -311,10 +314,10 @@ class ChannelMerger:
             )
         r0, r1 = cfg.reference
         x = as_float_audio(self._buf[0][r0, a - self._start[0]:a - self._start[0] + L])
-        b = a + self.offset - m - self._start[1]
+        b = a + k - m - self._start[1]
         y = as_float_audio(self._buf[1][r1, b:b + L + 2 * m])
         lag, peak = gcc_phat_lag(x, y, self.fs, (0, 2 * m), cfg.band_hz)
-        exact = self.offset + (lag - m) - cfg.expected_tdoa_s * self.fs
+        exact = k + (lag - m) - cfg.expected_tdoa_s * self.fs
         confident = peak >= cfg.min_peak
         fit_res = direction = None
         if self.positions is not None and confident:
@@ -348,16 +351,24 @@ class ChannelMerger:
         direction = -s / norm if norm > 0 else np.zeros(3)
         return delta, direction, rms
 
-    def track(self, window_s: float = 0.5, search_s: float = 0.002) -> OffsetEstimate | None:
+    def track(self, window_s: float = 0.5, search_s: float = 0.002, slip: float | None = None) -> OffsetEstimate | None:
         """Follow the offset during a mission; applies and returns a changed, confident estimate, else None.
 
         Re-measures within ``search_s`` of the current offset (clock drift, a sample now and then). When
         that finds nothing trustworthy, or its peak sits at the edge of the search (the true offset may
         lie beyond: the streams slipped, e.g. samples lost in a driver), the whole ``max_offset_s`` is
-        searched again (re-calibration): a narrow search alone once applied -30 for an 80-sample slip."""
-        est = self.estimate_offset(window_s, search_s)
+        searched again (re-calibration): a narrow search alone once applied -30 for an 80-sample slip.
+
+        ``slip``: samples by which device 1's stream was seen to slip (``ssl_core.health``'s ``device_slip``:
+        positive = device 1 later): the narrow search is made around ``offset + slip`` first. In a reverberant
+        room the whole-range search alone locked an 80-sample slip to a reflection 4 samples off."""
+        hinted = None
+        if slip is not None and math.isfinite(slip):
+            hinted = self.estimate_offset(window_s, search_s, centre=self.offset + int(round(slip)))
+            hinted = hinted if hinted.confident else None
+        est = hinted or self.estimate_offset(window_s, search_s)
         at_edge = abs(est.offset_exact - self.offset) >= search_s * self.fs - 1.5
-        if not est.confident or at_edge:
+        if hinted is None and (not est.confident or at_edge):
             est = self.estimate_offset(window_s, self.config.max_offset_s)
         if not est.confident or est.offset == self.offset:
             return None
@@ -520,12 +531,13 @@ class ArrayCapture(AudioSource):
                 log.debug("offset tracking skipped: %s", exc)
         return AudioBlock(out, self._rate, t)
 
-    def resync(self) -> None:
-        """Track the devices' offset now rather than on schedule (e.g. the health monitor saw a slip)."""
+    def resync(self, slip_samples: float | None = None) -> None:
+        """Track the devices' offset now rather than on schedule (e.g. the health monitor saw a slip of
+        ``slip_samples``, device 1 later)."""
         if self.merger.positions is None:
             return
         try:
-            self.merger.track(window_s=0.5, search_s=0.002)
+            self.merger.track(window_s=0.5, search_s=0.002, slip=slip_samples)
             self._since_track = 0
         except ValueError as exc:
             log.debug("offset re-sync skipped: %s", exc)
