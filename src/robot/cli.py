@@ -4,6 +4,7 @@ Real robot:    ssl-robot --serial /dev/ttyUSB0 --audio 2,3 [--channel-map A0,A1,
 Mics only:     ssl-robot --dry-run --audio 2,3            (live audio, motors untouched)
 Replay:        ssl-robot --dry-run --replay REC.wav       (8-channel WAV, simulated ideal drive)
 Devices:       ssl-robot --list-audio
+Motor noise:   ssl-robot calibrate-ego-noise --serial /dev/ttyUSB0 --audio 2,3 [--out FILE]
 
 Every decision is printed as it is taken (``--json``: one JSON object per line).
 Ctrl-C stops the robot.
@@ -210,6 +211,10 @@ def _jsonable(o):
 
 def main(argv: list[str] | None = None, out=None) -> int:
     out = out or sys.stdout
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["calibrate-ego-noise"]:  # the drive's noise template (robot.ego_calibration)
+        from robot.ego_calibration import main as calibrate_main
+        return calibrate_main(argv[1:], out)
     args = _parser().parse_args(argv)
     logging.basicConfig(level=logging.DEBUG if args.verbose else logging.WARNING,
                         format="%(levelname)s %(name)s: %(message)s")

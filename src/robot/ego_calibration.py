@@ -112,3 +112,54 @@ def array_geometry_check(geometry: ArrayGeometry, template: EgoNoiseTemplate) ->
     if template.channels != geometry.n_mics:
         raise ValueError(f"ego-noise template: recorded with {template.channels} microphones, "
                          f"the array has {geometry.n_mics}")
+
+
+def main(argv: list[str] | None = None, out=None) -> int:
+    """``ssl-robot calibrate-ego-noise --serial PORT --audio DEV_A,DEV_B [--out FILE]``: turn in place through
+    the wheel-speed range with nobody talking and write the template file (``ssl_core.ego_noise``)."""
+    import argparse
+    import sys
+
+    from robot import cli
+
+    out = out or sys.stdout
+    p = argparse.ArgumentParser(prog=f"{cli.PROG} calibrate-ego-noise", description=main.__doc__)
+    p.add_argument("--serial", metavar="PORT", required=True, help="drive MCU serial port or pyserial URL")
+    p.add_argument("--audio", metavar="DEV_A,DEV_B", required=True, help="the two 4-channel USB microphone devices")
+    p.add_argument("--channel-map", default="A0,A1,A2,A3,B0,B1,B2,B3", help="as for ssl-robot (default: %(default)s)")
+    p.add_argument("--fs", type=int, default=16000, help="sample rate (Hz) (default: %(default)s)")
+    p.add_argument("--array", default="cube8", help="array preset or geometry file (default: %(default)s)")
+    p.add_argument("--record-s", type=float, default=2.0, help="seconds recorded per speed (default: %(default)s)")
+    p.add_argument("--out", default="ego_noise_template.npz", help="template file to write (default: %(default)s)")
+    args = p.parse_args(argv)
+    args.dry_run, args.replay, args.calibrate = False, None, 2.0
+    if not (np.isfinite(args.record_s) and args.record_s > 0.1):
+        print(f"{p.prog}: error: --record-s: expected > 0.1 s, got {args.record_s}", file=sys.stderr)
+        return 2
+    from ssl_core.geometry import get_array
+
+    drive = audio = None
+    try:
+        geometry = get_array(args.array)
+        clock = cli._MissionClock()
+        drive = cli._open_drive(args, clock)
+        audio = cli._open_audio(args, clock, geometry, out)
+        print(f"{p.prog}: keep quiet: the robot turns in place through {len(DEFAULT_SPEEDS)} wheel speeds "
+              f"({DEFAULT_SPEEDS[0]:g}-{DEFAULT_SPEEDS[-1]:g} rad/s), about "
+              f"{len(DEFAULT_SPEEDS) * (args.record_s + 0.5):.0f} s", file=out, flush=True)
+        template = calibrate_ego_noise(drive, audio, clock, record_s=args.record_s,
+                                       progress=lambda i, n, s: print(f"  {i + 1}/{n}: {s:g} rad/s", file=out,
+                                                                      flush=True))
+        array_geometry_check(geometry, template)
+        template.save(args.out)
+    except (ValueError, FileNotFoundError, ImportError, OSError, RuntimeError) as exc:
+        print(f"{p.prog}: error: {exc}", file=sys.stderr)
+        return 1
+    finally:
+        for dev in (drive, audio):
+            if dev is not None:
+                dev.close()
+    for s, lv in zip(template.speeds_rad_s, template.level_dbfs):
+        print(f"  {s:6.2f} rad/s: {lv:6.1f} dB re full scale (300-6000 Hz)", file=out)
+    print(f"{p.prog}: wrote {args.out}", file=out)
+    return 0

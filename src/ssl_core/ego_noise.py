@@ -140,7 +140,11 @@ class EgoNoiseConfig:
     floor_below_m: float | None = None
     spatial: bool = False
     spectral: bool = True
-    over_subtraction: float = 2.0
+    # g: 6 and 8 tracked the caller within 10 deg in 92-94 % of 1 s windows at 0.1-0.3 m/s (three drives each),
+    # 3-4 in 67-94 %: PHAT counts every bin the weights let through at full coherence, and the motors'
+    # residue in a pause of her voice is one fixed direction (docs/design/ego_noise.md).
+    over_subtraction: float = 6.0
+    exclude_deg: float = 20.0
     min_speed: float = 0.05
 
     def __post_init__(self) -> None:
@@ -153,6 +157,8 @@ class EgoNoiseConfig:
             raise ValueError(f"EgoNoiseConfig.floor_below_m: expected > 0 m or None, got {self.floor_below_m}")
         if not self.over_subtraction > 0:
             raise ValueError(f"EgoNoiseConfig.over_subtraction: expected > 0, got {self.over_subtraction}")
+        if not 0 <= self.exclude_deg < 90:
+            raise ValueError(f"EgoNoiseConfig.exclude_deg: expected 0 <= deg < 90, got {self.exclude_deg}")
         if not self.min_speed >= 0:
             raise ValueError(f"EgoNoiseConfig.min_speed: expected >= 0 rad/s, got {self.min_speed}")
 
@@ -173,6 +179,7 @@ class EgoNoiseSuppressor:
             img = src.copy()
             img[:, 2] = -2 * config.floor_below_m - src[:, 2]
             src = np.vstack([src, img])
+        self._sources = src
         arrival = np.linalg.norm(src[:, None, :] - geometry.positions[None], axis=-1) / sound_speed  # (S, M)
         p = geometry.pairs
         #: near-field TDOAs t_i - t_j (s) of every masked source, (pairs, sources)
@@ -183,6 +190,14 @@ class EgoNoiseSuppressor:
         """Whether any wheel turns at ``min_speed`` or faster (else nothing is suppressed)."""
         return wheel_speeds is not None and bool(np.any(np.abs(np.asarray(wheel_speeds, float))
                                                        >= self.config.min_speed))
+
+    def excluded(self, directions: np.ndarray) -> np.ndarray:
+        """Boolean (n,): unit ``directions`` (n, 3, array frame) within ``exclude_deg`` of a motor (or floor
+        image) seen from the array centre, where the search may not place a source while the wheels turn."""
+        if self.config.exclude_deg <= 0:
+            return np.zeros(len(directions), bool)
+        m = self._sources / np.linalg.norm(self._sources, axis=1, keepdims=True)
+        return (np.asarray(directions) @ m.T).max(axis=1) >= np.cos(np.deg2rad(self.config.exclude_deg))
 
     def lag_mask(self, lags_s: np.ndarray, halfwidth_s: float) -> np.ndarray:
         """Boolean (pairs, lags): True where a lag (s) lies within ``halfwidth_s`` of a motor's TDOA."""

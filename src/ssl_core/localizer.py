@@ -347,7 +347,8 @@ class Localizer:
                 return LocalizationResult(t_end, [], np.zeros(self.coarse_grid.n_points), frames)
             gcc, n_eff = gcc_sum / w_sum, w_sum**2 / w_sq
             detections = pool.modes(cfg.n_sources, np.deg2rad(cfg.min_separation_deg), min_windows=2)
-            srp_map, peaks = self._search(gcc, n_eff)
+            moving = self.ego_noise is not None and self.ego_noise.moving(st.wheel_speeds)
+            srp_map, peaks = self._search(gcc, n_eff, excluded=self._ego_excluded() if moving else None)
         level = float(10 * np.log10(ms_sum / frames))
         if not detections:  # no two windows agreed: the summed map's peaks, if significant
             for power, f, z in peaks:
@@ -520,7 +521,7 @@ class Localizer:
             gcc = np.where(mask, 0.0, gcc).astype(gcc.dtype)
             if rescan is not None:
                 rescan = (np.where(mask, 0.0, rescan[0]).astype(rescan[0].dtype), rescan[1])
-        srp_map, peaks = self._search(gcc, n_eff, rescan)
+        srp_map, peaks = self._search(gcc, n_eff, rescan, None if ego is None else self._ego_excluded())
         detections = []
         for power, f, z in peaks:
             u = self.fine_grid.directions[f]
@@ -594,8 +595,17 @@ class Localizer:
         q = (np.conj(x) * y).sum(axis=1).real / m
         return np.clip(1.0 - _NOVELTY_GAIN / np.maximum(q, 1e-12), 0.0, 1.0).T.astype(np.float32)
 
-    def _search(self, gcc: np.ndarray, n_eff: float, rescan: tuple[np.ndarray, float] | None = None
-                ) -> tuple[np.ndarray, list[tuple[float, int, float]]]:
+    def _ego_excluded(self) -> np.ndarray | None:
+        """Coarse points the search skips while the wheels turn (the motors' directions), or None."""
+        if self._ego_coarse is None:
+            ex = self.ego_noise.excluded(self.coarse_grid.directions)
+            self._ego_coarse = ex if ex.any() else np.zeros(0, bool)
+        return self._ego_coarse if self._ego_coarse.size else None
+
+    _ego_coarse: np.ndarray | None = None
+
+    def _search(self, gcc: np.ndarray, n_eff: float, rescan: tuple[np.ndarray, float] | None = None,
+                excluded: np.ndarray | None = None) -> tuple[np.ndarray, list[tuple[float, int, float]]]:
         """Coarse-to-fine multi-source search; returns the first coarse map and (power, fine index,
         significance) of each detection.
 
@@ -603,7 +613,7 @@ class Localizer:
         scan (as in ODAS, Grondin and Michaud 2019), so its lobes do not hide weaker sources.
         ``rescan``: (GCC, effective bins) scanned after the first source instead of ``gcc`` if it peaks
         away from that source (found TDOAs masked the same way, the significance scaled by its own bin
-        count; see ``interference_rescan``).
+        count; see ``interference_rescan``). ``excluded``: coarse points never searched (ego-noise directions).
         The search stops at the first peak that fails the significance test (module docstring).
         """
         cfg = self.config
@@ -617,6 +627,8 @@ class Localizer:
             coarse = self._coarse.power(pooled)
             if srp_map is None:
                 srp_map = coarse
+            if excluded is not None:
+                coarse = np.where(excluded, -np.inf, coarse)
             if peaks:  # no second detection inside the separation cone of a found one
                 found_dirs = self.fine_grid.directions[[f for _, f, _ in peaks]]
                 coarse = np.where((self.coarse_grid.directions @ found_dirs.T).max(axis=1) > cos_sep, -np.inf, coarse)
