@@ -9,7 +9,9 @@ next 1 s of audio is localized (``ssl_core`` Localizer, the scenario's settings,
 caller's direction in the array frame at the middle of the block. Speeds: body twist (0, v, 0)
 (sideways, so the caller stays ahead), alternating left/right over the seeds. Ego-noise:
 ``ssl_sim.acoustics.ego_noise`` defaults (on) or a silent drive (off). Suppression: motor positions from
-``robot.ego_calibration.MotorMount`` (the robot's layout, not the simulator's), the template from
+``robot.ego_calibration.MotorMount`` (the robot's layout, not the simulator's); "cone": the search skips
+directions within 20 deg of a motor while the wheels turn; "lag mask": each motor's near-field TDOAs are
+zeroed in every pair's GCC; "template": the spectral bin weights, the template from
 ``robot.ego_calibration.calibrate_ego_noise`` run first in the same room with the caller silent (another
 acoustic seed), wheel speeds from the drive's encoders (mean of the readings before and after the block).
 
@@ -38,7 +40,8 @@ RESULTS = Path(__file__).resolve().parent / "results"
 SPEEDS = (0.0, 0.1, 0.2, 0.3)  # m/s (0.3 = EnvConfig.max_speed)
 #: (label, motors audible, suppression methods)
 MODES = (("motors silent", False, None), ("motors on, no suppression", True, None),
-         ("spatial only", True, "spatial"), ("spectral only", True, "spectral"), ("both", True, "both"))
+         ("spatial: lag mask + cone", True, "spatial"), ("spectral: template", True, "spectral"),
+         ("template + cone (default)", True, "default"), ("template + lag mask + cone", True, "all"))
 CALIBRATION_SEED = 100
 
 
@@ -58,8 +61,9 @@ def calibrate(seed: int = CALIBRATION_SEED) -> EgoNoiseTemplate:
 def suppressor(method: str | None, template: EgoNoiseTemplate) -> EgoNoiseSuppressor | None:
     if method is None:
         return None
-    cfg = MotorMount().suppression_config(spatial=method in ("spatial", "both"),
-                                          spectral=method in ("spectral", "both"))
+    kw = {"spatial": dict(spatial=True, spectral=False), "spectral": dict(spatial=False, exclude_deg=0.0),
+          "default": {}, "all": dict(spatial=True)}[method]
+    cfg = MotorMount().suppression_config(**kw)
     return EgoNoiseSuppressor(cube8(), cfg, template)
 
 
