@@ -90,3 +90,54 @@ def test_bad_input_is_named(template, tmp_path):
         EgoNoiseTemplate.load(bad)
     with pytest.raises(ValueError, match="psd"):
         EgoNoiseTemplate(16000, np.array([1.0, 2.0]), np.array([1.0]), np.zeros((2, 2)), np.zeros(1))
+
+
+class _Audio:
+    sample_rate, n_channels = 16000, 8
+
+    def __init__(self):
+        self.rng = np.random.default_rng(5)
+
+    def flush(self):
+        pass
+
+    def read(self, n):
+        from robot.hal import AudioBlock
+        return AudioBlock((0.01 * self.rng.normal(size=(8, n))).astype(np.float32), 16000, 0.0)
+
+
+class _Drive:
+    def __init__(self, speeds):
+        self.speeds, self.reads = np.asarray(speeds, float), 0
+
+    def odometry(self):
+        from robot.hal import WheelOdometry
+        self.reads += 1
+        return WheelOdometry(0.0, np.zeros(3), self.speeds)
+
+
+class _SpyLocalizer(Localizer):
+    def locate(self, recording, fs=None, wheel_speeds=None):
+        self.seen = wheel_speeds
+        return super().locate(recording, fs, wheel_speeds=wheel_speeds)
+
+
+def test_listener_passes_the_wheel_speeds_only_to_a_suppressing_localizer(template):
+    from robot.hal import ManualClock
+    from robot.listening import Listener
+
+    drive = _Drive([2.0, -4.0, 2.0])
+    loc = _SpyLocalizer(cube8(), LocalizerConfig(), ego_noise=suppressor(template))
+    Listener(_Audio(), ManualClock(), loc, None, drive=drive).listen(0.5, 0.0, 0.0)
+    np.testing.assert_allclose(loc.seen, [2.0, -4.0, 2.0])
+    plain = _SpyLocalizer(cube8(), LocalizerConfig())
+    drive = _Drive([2.0, -4.0, 2.0])
+    Listener(_Audio(), ManualClock(), plain, None, drive=drive).listen(0.5, 0.0, 0.0)
+    assert plain.seen is None and drive.reads == 0   # without a suppressor the drive is not even asked
+
+
+def test_calibrate_cli_names_the_missing_drive(capsys):
+    from robot.cli import main
+    with pytest.raises(SystemExit):
+        main(["calibrate-ego-noise", "--audio", "2,3"])
+    assert "--serial" in capsys.readouterr().err

@@ -333,7 +333,8 @@ class RescueBehaviour:
                              range_layout=range_layout)
         self.range_layout = range_layout
         self._scan_pose: np.ndarray | None = None   # where the last range reading went into the grid
-        self.listener = Listener(audio, clock, localizer, mics, config.voice_threshold, speech, config.voice_scan_deg)
+        self.listener = Listener(audio, clock, localizer, mics, config.voice_threshold, speech, config.voice_scan_deg,
+                                 drive=drive)
         self.map = SoundMap(dataclasses.replace(sound_map, array_height_m=config.array_height_m))
         self.grid = OccupancyGrid(occupancy, origin=np.asarray(start_pose, float)[:2])
         self.coverage = ListeningCoverage(self.grid.origin, self.grid.n, self.grid.resolution, coverage)
