@@ -37,6 +37,9 @@ of the robot start in radians. Example (``ssl_sim/scenarios/paper_lab.toml``)::
     level_db_spl = 30.0
     spectrum = "hvac"
 
+    [ego_noise]              # the drive's own motors while the wheels turn (ssl_sim.acoustics.ego_noise
+    level_db_spl_1m = 40.0   # EgoNoiseConfig fields; on by default, enabled = false for a silent drive)
+
     [acoustics]              # AcousticConfig fields: rt60_s, ism_order, max_rir_s, late_reverb, ...
     [localizer]              # ssl_core LocalizerConfig fields
     [behaviour]              # robot.rescue RescueConfig fields (decisions)
