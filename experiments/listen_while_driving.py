@@ -10,7 +10,7 @@ caller's direction in the array frame at the middle of the block. Speeds: body t
 (sideways, so the caller stays ahead), alternating left/right over the seeds. Ego-noise:
 ``ssl_sim.acoustics.ego_noise`` defaults (on) or a silent drive (off). Suppression: motor positions from
 ``robot.ego_calibration.MotorMount`` (the robot's layout, not the simulator's); "cone": the search skips
-directions within 20 deg of a motor while the wheels turn; "lag mask": each motor's near-field TDOAs are
+directions within 30 deg of a motor while the wheels turn; "lag mask": each motor's near-field TDOAs are
 zeroed in every pair's GCC; "template": the spectral bin weights, the template from
 ``robot.ego_calibration.calibrate_ego_noise`` run first in the same room with the caller silent (another
 acoustic seed), wheel speeds from the drive's encoders (mean of the readings before and after the block).

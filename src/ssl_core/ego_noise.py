@@ -2,6 +2,8 @@
 
 Two methods, both driven by side information the robot has every control tick:
 
+* **Spatial (cone).** While the wheels turn the search skips directions within ``exclude_deg`` of a motor
+  or its floor image (far below any caller the robot can hear).
 * **Spatial (lag mask).** The motors sit at fixed positions in the array frame (a few tens of cm below
   the array, well inside its near field), so each motor's TDOA on every microphone pair is a constant.
   Like the multi-source search masks a found source, the GCC of every pair is zeroed within half a main
@@ -133,7 +135,9 @@ class EgoNoiseConfig:
     method alone is the default: measured (experiments/listen_while_driving.py, docs/design/ego_noise.md) it
     brings the median error while driving at 0.1-0.3 m/s back to that of a silent drive, while the lag mask,
     alone or with it, also removes lags the caller shares with a motor on some pairs and costs degrees.
-    ``over_subtraction``: ``g`` of the spectral weights. ``min_speed``: wheel speeds (rad/s) below this
+    ``over_subtraction``: ``g`` of the spectral weights. ``exclude_deg``: while the wheels turn the search skips
+    directions within this angle of a motor or floor image (30: two front motors turning together make an SRP
+    peak between them, 21 deg from each; docs/design/ego_noise.md). ``min_speed``: wheel speeds (rad/s) below this
     count as standing (no suppression at all: a parked robot hears exactly as without it)."""
 
     motor_positions: tuple[tuple[float, float, float], ...]
@@ -144,7 +148,7 @@ class EgoNoiseConfig:
     # 3-4 in 67-94 %: PHAT counts every bin the weights let through at full coherence, and the motors'
     # residue in a pause of her voice is one fixed direction (docs/design/ego_noise.md).
     over_subtraction: float = 6.0
-    exclude_deg: float = 20.0
+    exclude_deg: float = 30.0
     min_speed: float = 0.05
 
     def __post_init__(self) -> None:

@@ -595,17 +595,18 @@ class Localizer:
         q = (np.conj(x) * y).sum(axis=1).real / m
         return np.clip(1.0 - _NOVELTY_GAIN / np.maximum(q, 1e-12), 0.0, 1.0).T.astype(np.float32)
 
-    def _ego_excluded(self) -> np.ndarray | None:
-        """Coarse points the search skips while the wheels turn (the motors' directions), or None."""
-        if self._ego_coarse is None:
-            ex = self.ego_noise.excluded(self.coarse_grid.directions)
-            self._ego_coarse = ex if ex.any() else np.zeros(0, bool)
-        return self._ego_coarse if self._ego_coarse.size else None
+    def _ego_excluded(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """Coarse and fine points the search skips while the wheels turn (the motors' directions), or None."""
+        if self._ego_points is None:
+            c = self.ego_noise.excluded(self.coarse_grid.directions)
+            self._ego_points = (c, self.ego_noise.excluded(self.fine_grid.directions)) if c.any() else ()
+        return self._ego_points or None
 
-    _ego_coarse: np.ndarray | None = None
+    _ego_points: tuple | None = None
 
     def _search(self, gcc: np.ndarray, n_eff: float, rescan: tuple[np.ndarray, float] | None = None,
-                excluded: np.ndarray | None = None) -> tuple[np.ndarray, list[tuple[float, int, float]]]:
+                excluded: tuple[np.ndarray, np.ndarray] | None = None
+                ) -> tuple[np.ndarray, list[tuple[float, int, float]]]:
         """Coarse-to-fine multi-source search; returns the first coarse map and (power, fine index,
         significance) of each detection.
 
@@ -613,7 +614,7 @@ class Localizer:
         scan (as in ODAS, Grondin and Michaud 2019), so its lobes do not hide weaker sources.
         ``rescan``: (GCC, effective bins) scanned after the first source instead of ``gcc`` if it peaks
         away from that source (found TDOAs masked the same way, the significance scaled by its own bin
-        count; see ``interference_rescan``). ``excluded``: coarse points never searched (ego-noise directions).
+        count; see ``interference_rescan``). ``excluded``: (coarse, fine) masks of points never searched (ego-noise directions).
         The search stops at the first peak that fails the significance test (module docstring).
         """
         cfg = self.config
@@ -628,7 +629,7 @@ class Localizer:
             if srp_map is None:
                 srp_map = coarse
             if excluded is not None:
-                coarse = np.where(excluded, -np.inf, coarse)
+                coarse = np.where(excluded[0], -np.inf, coarse)
             if peaks:  # no second detection inside the separation cone of a found one
                 found_dirs = self.fine_grid.directions[[f for _, f, _ in peaks]]
                 coarse = np.where((self.coarse_grid.directions @ found_dirs.T).max(axis=1) > cos_sep, -np.inf, coarse)
@@ -641,6 +642,8 @@ class Localizer:
                     break
                 cols = self._refine[c]
                 p = self._fine.power(work, cols)
+                if excluded is not None:
+                    p = np.where(excluded[1][cols], -np.inf, p)
                 j = int(np.argmax(p))
                 if p[j] > best[0]:
                     best = (float(p[j]), int(cols[j]))
