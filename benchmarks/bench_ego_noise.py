@@ -71,7 +71,7 @@ def run(sc, sup, blocks, track: bool) -> float:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=10.0)
-    ap.add_argument("--repeats", type=int, default=3)
+    ap.add_argument("--repeats", type=int, default=5)
     args = ap.parse_args()
     sc, template, blocks = record(args.seconds)
     audio_s = len(blocks) * BLOCK / 16000
