@@ -3,7 +3,7 @@ audio heard while driving.
 
 Audio: the simulated robot drives sideways at 0.2 m/s past the paper_lab caller with its motors audible
 (``ssl_sim`` defaults), 10 s recorded once with the wheel speeds and array poses of every 128 ms block. Timed
-(CPU, ``time.process_time``, best of ``--repeats``): the streaming localizer (the scenario's settings, tracking
+(CPU, ``time.process_time``, ``--repeats`` interleaved runs; costs as the median of paired differences): the streaming localizer (the scenario's settings, tracking
 gate) without and with :class:`ssl_core.ego_noise.EgoNoiseSuppressor` (the template from a simulated
 calibration run), and the tracker fed with rotation and translation between windows. Prints figures, then
 one JSON line; writes ``benchmarks/results/bench_ego_noise.json``.
@@ -71,20 +71,25 @@ def run(sc, sup, blocks, track: bool) -> float:
 def main() -> None:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seconds", type=float, default=10.0)
-    ap.add_argument("--repeats", type=int, default=5)
+    ap.add_argument("--repeats", type=int, default=7)
     args = ap.parse_args()
     sc, template, blocks = record(args.seconds)
     audio_s = len(blocks) * BLOCK / 16000
     sup = EgoNoiseSuppressor(cube8(), MotorMount().suppression_config(), template)
-    best = {}
-    for name, s, track in (("localizer", None, False), ("localizer_suppressed", sup, False),
-                           ("localizer_suppressed_tracked", sup, True)):
-        best[name] = min(run(sc, s, blocks, track) for _ in range(args.repeats)) / audio_s * 1e3
-    figures = {"localizer_ms_cpu_per_s": round(best["localizer"], 2),
-               "suppression_ms_cpu_per_s": round(best["localizer_suppressed"] - best["localizer"], 2),
-               "tracking_ms_cpu_per_s": round(best["localizer_suppressed_tracked"] - best["localizer_suppressed"], 2),
-               "suppression_plus_tracking_ms_cpu_per_s": round(best["localizer_suppressed_tracked"]
-                                                               - best["localizer"], 2)}
+    runs = {"localizer": [], "localizer_suppressed": [], "localizer_suppressed_tracked": []}
+    for _ in range(args.repeats):  # interleaved, so a change of the machine's load hits all three alike
+        for name, s, track in (("localizer", None, False), ("localizer_suppressed", sup, False),
+                               ("localizer_suppressed_tracked", sup, True)):
+            runs[name].append(run(sc, s, blocks, track) / audio_s * 1e3)
+    r = {k: np.array(v) for k, v in runs.items()}
+    # paired differences of the same repeat, their median (the load of a shared machine drifts between repeats)
+    figures = {"localizer_ms_cpu_per_s": round(float(r["localizer"].min()), 2),
+               "localizer_suppressed_tracked_ms_cpu_per_s": round(float(r["localizer_suppressed_tracked"].min()), 2),
+               "suppression_ms_cpu_per_s": round(float(np.median(r["localizer_suppressed"] - r["localizer"])), 2),
+               "tracking_ms_cpu_per_s": round(float(np.median(r["localizer_suppressed_tracked"]
+                                                              - r["localizer_suppressed"])), 2),
+               "suppression_plus_tracking_ms_cpu_per_s": round(float(np.median(r["localizer_suppressed_tracked"]
+                                                                               - r["localizer"])), 2)}
     for k, v in figures.items():
         print(f"{k}: {v}")
     write_result("bench_ego_noise", figures)
