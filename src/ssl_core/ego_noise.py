@@ -1,6 +1,6 @@
 """Ego-noise suppression: the robot's own drive motors, heard by the array while the wheels turn.
 
-Two methods, both driven by side information the robot has every control tick:
+Methods, driven by side information the robot has every control tick (the wheel speeds, the motors' mounting):
 
 * **Spatial (cone).** While the wheels turn the search skips directions within ``exclude_deg`` of a motor
   or its floor image (far below any caller the robot can hear).
