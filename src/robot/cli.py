@@ -6,6 +6,7 @@ Replay:        ssl-robot --dry-run --replay REC.wav       (8-channel WAV, simula
 Record:        ssl-robot ... --record DIR                 (the mission's audio, drive and clock, for --replay DIR)
 Replay a mission: ssl-robot --dry-run --replay DIR        (the same audio, drive readings and times)
 Devices:       ssl-robot --list-audio
+Motor noise:   ssl-robot calibrate-ego-noise --serial /dev/ttyUSB0 --audio 2,3 [--out FILE]
 
 Every decision is printed as it is taken (``--json``: one JSON object per line on stdout, every other message
 on stderr). A WAV at another rate than the behaviour's 16 kHz is resampled as it is read (at least 12 kHz:
@@ -254,6 +255,10 @@ def _jsonable(o):
 @quiet_on_broken_pipe
 def main(argv: list[str] | None = None, out=None) -> int:
     out = out or sys.stdout
+    argv = sys.argv[1:] if argv is None else list(argv)
+    if argv[:1] == ["calibrate-ego-noise"]:  # the drive's noise template (robot.ego_calibration)
+        from robot.ego_calibration import main as calibrate_main
+        return calibrate_main(argv[1:], out)
     args = _parser().parse_args(argv)
     # with --json, stdout carries the JSON lines alone: every other message goes to stderr
     say = sys.stderr if args.json else out

@@ -87,11 +87,15 @@ class Listener:
     ``min_significance``) as a detection, kept only if its beam then owns the speech (``speech_fractions``'s
     owner rule; else the voice was a detection's beside it). Beside a louder machine the talker is often no peak
     of the map at all: in the five real-recording rooms of tests/test_hearing.py (a machine 6 dB louder) a voiced
-    detection pointed at her in 31 of 70 listens instead of 15."""
+    detection pointed at her in 31 of 70 listens instead of 15.
+
+    ``drive``: the ``DriveBase`` whose wheel speeds (read around the block) go to the localizer when it suppresses
+    the drive's noise (``Localizer.ego_noise``); standing still (speeds below its ``min_speed``) nothing changes."""
 
     def __init__(self, audio: AudioSource, clock: Clock, localizer: Any, mic_positions: np.ndarray | None,
-                 voice_threshold: float = 0.2, speech=None, voice_scan_deg: float = 0.0) -> None:
+                 voice_threshold: float = 0.2, speech=None, voice_scan_deg: float = 0.0, drive=None) -> None:
         self.audio, self.clock, self.localizer = audio, clock, localizer
+        self.drive = drive
         self.mic_positions = mic_positions
         self.voice_threshold = voice_threshold
         self.speech = speech
@@ -103,13 +107,17 @@ class Listener:
         self.audio.flush()
         n = max(1, int(round(seconds * self.audio.sample_rate)))
         t0 = self.clock.now()
+        wheels = self._wheel_speeds()
         block = self.audio.read(n)
         # Listening takes the block's duration of clock time. Live and simulated sources let it pass
         # themselves; for one that does not (a file without a clock) let it pass here, standing still.
         lag = n / self.audio.sample_rate - (self.clock.now() - t0)
         if lag > 1e-9:
             self.clock.sleep(lag)
-        result = self.localizer.locate(block.samples)
+        if wheels is None:
+            result = self.localizer.locate(block.samples)
+        else:  # the drive's noise is suppressed from the wheel speeds (mean of the readings around the block)
+            result = self.localizer.locate(block.samples, wheel_speeds=0.5 * (wheels + self._wheel_speeds()))
         dets: list[Detection] = list(getattr(result, "detections", []) or [])
         heard = self._evidence(block, dets, self.clock.now(), min_power)
         # The strongest source is no voice (or none is heard): a voice may be hiding beside it.
@@ -122,6 +130,13 @@ class Listener:
                 if len(scanned[0]) > len(heard[0]) and scanned[0][-1].speech_fraction >= self.voice_threshold:
                     heard = scanned
         return Listen(block, *heard)
+
+    def _wheel_speeds(self) -> np.ndarray | None:
+        """The wheels' speeds (3,) rad/s from ``drive``, only when the localizer suppresses the drive's noise
+        (``Localizer.ego_noise``); None otherwise (the drive is then not asked at all)."""
+        if self.drive is None or getattr(self.localizer, "ego_noise", None) is None:
+            return None
+        return np.asarray(self.drive.odometry().wheel_speeds, float)
 
     @property
     def vad(self) -> SileroVad:

@@ -326,7 +326,8 @@ class RescueBehaviour:
                              range_layout=range_layout)
         self.range_layout = range_layout
         self._scan_pose: np.ndarray | None = None   # where the last range reading went into the grid
-        self.listener = Listener(audio, clock, localizer, mics, config.voice_threshold, speech, config.voice_scan_deg)
+        self.listener = Listener(audio, clock, localizer, mics, config.voice_threshold, speech, config.voice_scan_deg,
+                                 drive=drive)
         if speech is None and mics is not None:
             _ = self.listener.vad   # the model files checked now (robot.vad.ModelError), not at the first listen
         self.map = SoundMap(dataclasses.replace(sound_map, array_height_m=config.array_height_m))

@@ -50,7 +50,7 @@ from robot.config_values import need
 from robot.odometry import Pose2D
 
 __all__ = ["BearingEvidence", "DISTINCT_POSES_M", "SoundMapConfig", "SourceClass", "SourceState", "Listen",
-           "MapSource", "SoundMap", "triangulate"]
+           "MapSource", "SoundMap", "pose_at", "triangulate"]
 
 
 class BearingEvidence(Protocol):
@@ -62,6 +62,20 @@ class BearingEvidence(Protocol):
     voice_probability: float       # 0..1
     level_db: float                # beam level toward it (dB re full-scale sine)
     activity: float                # 0..1
+
+
+def pose_at(trajectory, time: float) -> Pose2D:
+    """Pose at ``time`` (s) linearly interpolated in a trajectory (k, 4) of rows ``(time, x, y, yaw)`` with
+    increasing times (yaw unwrapped first; held at the ends)."""
+    tr = np.asarray(trajectory, float)
+    if tr.ndim != 2 or tr.shape[1] != 4 or len(tr) < 1 or not np.all(np.isfinite(tr)):
+        raise ValueError(f"trajectory: expected finite (k >= 1, 4) rows (time, x, y, yaw), got shape {tr.shape}")
+    if np.any(np.diff(tr[:, 0]) <= 0):
+        raise ValueError("trajectory: times must increase")
+    t = float(time)
+    yaw = np.unwrap(tr[:, 3])
+    return Pose2D(float(np.interp(t, tr[:, 0], tr[:, 1])), float(np.interp(t, tr[:, 0], tr[:, 2])),
+                  float(np.interp(t, tr[:, 0], yaw)))
 
 
 class SourceClass(str, Enum):
@@ -489,6 +503,23 @@ class SoundMap:
         self._forget()
         alive = {s.id for s in self._sources}
         return [(ev, self._resolve(sid)) for ev, sid in out if self._resolve(sid) in alive]
+
+    def update_moving(self, evidence: Sequence[BearingEvidence], trajectory, window_s: float
+                      ) -> list[tuple[BearingEvidence, int]]:
+        """``update`` for evidence heard while the robot moved: each piece at the pose interpolated at the
+        middle of its analysis window (``ev.time`` is the window's end, ``window_s`` s its length; a 1 s
+        listen at 0.3 m/s moves the array 0.3 m, so the pose at either end would be up to 0.15 m off).
+        ``trajectory``: (k, 4) rows ``(time s, x m, y m, yaw rad)`` in stream time, increasing. Evidence of
+        one window time is one ``update`` (its rays still never join one source)."""
+        if not (math.isfinite(window_s) and window_s >= 0):
+            raise ValueError(f"window_s: expected a finite length >= 0 s, got {window_s!r}")
+        out: list[tuple[BearingEvidence, int]] = []
+        groups: dict[float, list[BearingEvidence]] = {}
+        for ev in evidence:
+            groups.setdefault(float(ev.time), []).append(ev)
+        for t in sorted(groups):
+            out += self.update(groups[t], pose_at(trajectory, t - 0.5 * window_s), t)
+        return out
 
     def set_state(self, source_id: int, state: SourceState, time: float | None = None) -> None:
         """Behaviour's verdict; a found source never goes back."""

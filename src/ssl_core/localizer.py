@@ -32,6 +32,7 @@ from scipy.spatial import cKDTree
 from ssl_core.beamform import FULL_SCALE_SINE_MS as _FULL_SCALE_SINE_MS
 from ssl_core.beamform import arrival_times, delay_and_sum
 from ssl_core.detection import Detection
+from ssl_core.ego_noise import EgoNoiseSuppressor
 from ssl_core.gcc_phat import LagSteering, band_bins, frame_spectra, summed_phat_cross_spectra
 from ssl_core.geometry import ArrayGeometry, get_array
 from ssl_core.grid import SphericalGrid, azimuth_elevation, make_grid, n_points_for_spacing
@@ -198,18 +199,28 @@ class _Stream:
     cov_windows: int = 0
     rescan: tuple[np.ndarray, float, float] | None = None
     onset_mean: np.ndarray | None = None  # per-bin recent mean power (bins,) of the onset weights
+    wheel_speeds: np.ndarray | None = None  # the drive's wheel speeds (3,) rad/s for the ego-noise suppression
 
 
 class Localizer:
-    """SRP-PHAT localizer for one array geometry; see the module docstring."""
+    """SRP-PHAT localizer for one array geometry; see the module docstring.
 
-    def __init__(self, geometry: ArrayGeometry | str = "cube8", config: LocalizerConfig = LocalizerConfig()):
+    ``ego_noise``: suppression of the robot's own drive motors (:mod:`ssl_core.ego_noise`), active in the
+    windows analysed while the wheel speeds given to :meth:`process` / :meth:`locate` are non-zero."""
+
+    def __init__(self, geometry: ArrayGeometry | str = "cube8", config: LocalizerConfig = LocalizerConfig(),
+                 ego_noise: EgoNoiseSuppressor | None = None):
         self.geometry = get_array(geometry)
         self.config = cfg = config
+        if ego_noise is not None and ego_noise.geometry.n_mics != self.geometry.n_mics:
+            raise ValueError(f"ego_noise: built for {ego_noise.geometry.n_mics} microphones, the array has "
+                             f"{self.geometry.n_mics}")
+        self.ego_noise = ego_noise
         self.pairs = self.geometry.pairs
         self._window = np.hanning(cfg.frame_size + 2)[1:-1].astype(np.float32)  # periodic-like Hann without zero ends
         self._bins = band_bins(cfg.fs, cfg.frame_size, cfg.band_hz)
         self._omega = 2 * np.pi * self._bins * cfg.fs / cfg.frame_size
+        self._freqs = self._bins * cfg.fs / cfg.frame_size
         # Parseval: band mean square of a frame = 2 sum|X|^2 / (N sum w^2)
         self._ms_scale = 2.0 / (cfg.frame_size * np.sum(self._window**2))
 
@@ -291,9 +302,12 @@ class Localizer:
         return spec, ms
 
     # ------------------------------------------------------------------ public API
-    def process(self, block, fs: int | None = None) -> list[LocalizationResult]:
-        """Feed a block (channels, samples) of any length; returns the windows it completed."""
+    def process(self, block, fs: int | None = None, wheel_speeds=None) -> list[LocalizationResult]:
+        """Feed a block (channels, samples) of any length; returns the windows it completed.
+        ``wheel_speeds``: the drive's wheel speeds (3,) rad/s during the block, for the ego-noise suppression
+        (None or zeros: standing; the windows completed by this block use them)."""
         x = self._check(block, fs)
+        self._stream.wheel_speeds = self._check_speeds(wheel_speeds)
         with _one_blas_thread():
             return self._process(x, self._stream)
 
@@ -302,17 +316,17 @@ class Localizer:
         self.reset()
         return self.process(recording, fs)
 
-    def locate(self, recording, fs: int | None = None) -> LocalizationResult:
+    def locate(self, recording, fs: int | None = None, wheel_speeds=None) -> LocalizationResult:
         """Localize over a whole recording (channels, samples): every source its windows find
-        consistently, strongest first (see :meth:`locate_blocks`)."""
+        consistently, strongest first (see :meth:`locate_blocks`). ``wheel_speeds`` as in :meth:`process`."""
         x = self._check(recording, fs)
         if x.shape[1] < self.config.frame_size:
             raise ValueError(
                 f"recording too short: {x.shape[1]} samples, need at least frame_size={self.config.frame_size}"
             )
-        return self.locate_blocks([x])
+        return self.locate_blocks([x], wheel_speeds=wheel_speeds)
 
-    def locate_blocks(self, blocks: Iterable, fs: int | None = None) -> LocalizationResult:
+    def locate_blocks(self, blocks: Iterable, fs: int | None = None, wheel_speeds=None) -> LocalizationResult:
         """Whole-recording answer from consecutive blocks (channels, samples), in bounded memory.
 
         The windows' detections are pooled into a direction density (:class:`~ssl_core.pooling.DirectionPool`);
@@ -326,8 +340,10 @@ class Localizer:
         cfg = self.config
         pool = DirectionPool(self.fine_grid.directions)
         gcc_sum, w_sum, w_sq, ms_sum, frames, t_end = 0.0, 0.0, 0.0, 0.0, 0, 0.0
+        st = self._new_stream()
+        st.wheel_speeds = self._check_speeds(wheel_speeds)
         with _one_blas_thread():
-            for r in self._windows(blocks, fs, self._new_stream()):
+            for r in self._windows(blocks, fs, st):
                 pool.add(r.detections)
                 t_end = r.time
                 frames += r.active_frames
@@ -340,7 +356,8 @@ class Localizer:
                 return LocalizationResult(t_end, [], np.zeros(self.coarse_grid.n_points), frames)
             gcc, n_eff = gcc_sum / w_sum, w_sum**2 / w_sq
             detections = pool.modes(cfg.n_sources, np.deg2rad(cfg.min_separation_deg), min_windows=2)
-            srp_map, peaks = self._search(gcc, n_eff)
+            moving = self.ego_noise is not None and self.ego_noise.moving(st.wheel_speeds)
+            srp_map, peaks = self._search(gcc, n_eff, excluded=self._ego_excluded() if moving else None)
         level = float(10 * np.log10(ms_sum / frames))
         if not detections:  # no two windows agreed: the summed map's peaks, if significant
             for power, f, z in peaks:
@@ -406,6 +423,14 @@ class Localizer:
         return r.gcc if r.gcc is not None else np.zeros((len(self.pairs), self._lag_axis.size), np.float32)
 
     # ------------------------------------------------------------------ internals
+    def _check_speeds(self, wheel_speeds) -> np.ndarray | None:
+        if wheel_speeds is None:
+            return None
+        w = np.asarray(wheel_speeds, float).ravel()
+        if w.size != 3 or not np.all(np.isfinite(w)):
+            raise ValueError(f"wheel_speeds: expected 3 finite wheel speeds (rad/s), got {wheel_speeds!r}")
+        return w
+
     def _active(self, ms: np.ndarray) -> np.ndarray:
         with np.errstate(divide="ignore"):
             level = 10 * np.log10(ms / _FULL_SCALE_SINE_MS)
@@ -491,10 +516,21 @@ class Localizer:
         level = float(10 * np.log10(ms[active].mean() / _FULL_SCALE_SINE_MS))
         spec_a = spec[:, active]
         w_a = None if weights is None else weights[active]
+        ego = self.ego_noise if self.ego_noise is not None and self.ego_noise.moving(st.wheel_speeds) else None
+        if ego is not None and ego.config.spectral:
+            w_e = ego.bin_weights((spec_a.real**2 + spec_a.imag**2).mean(axis=0), self._freqs, st.wheel_speeds,
+                                  self._window)
+            w_a = w_e if w_a is None else w_a * w_e
         gcc, w_sum, n_eff = self._gcc(spec_a, w_a)
         rescan = self._rescan_gcc(spec_a, w_a, st) if self.config.interference_rescan and \
             self.config.n_sources > 1 else None
-        srp_map, peaks = self._search(gcc, n_eff, rescan)
+        if ego is not None and ego.config.spatial:  # the motors' near-field TDOAs, as a found source's
+            mask = ego.lag_mask(self._lag_axis / (self.config.fs * self.config.upsample),
+                                self._mask_halfwidth / (self.config.fs * self.config.upsample))
+            gcc = np.where(mask, 0.0, gcc).astype(gcc.dtype)
+            if rescan is not None:
+                rescan = (np.where(mask, 0.0, rescan[0]).astype(rescan[0].dtype), rescan[1])
+        srp_map, peaks = self._search(gcc, n_eff, rescan, None if ego is None else self._ego_excluded())
         detections = []
         for power, f, z in peaks:
             u = self.fine_grid.directions[f]
@@ -568,7 +604,17 @@ class Localizer:
         q = (np.conj(x) * y).sum(axis=1).real / m
         return np.clip(1.0 - _NOVELTY_GAIN / np.maximum(q, 1e-12), 0.0, 1.0).T.astype(np.float32)
 
-    def _search(self, gcc: np.ndarray, n_eff: float, rescan: tuple[np.ndarray, float] | None = None
+    def _ego_excluded(self) -> tuple[np.ndarray, np.ndarray] | None:
+        """Coarse and fine points the search skips while the wheels turn (the motors' directions), or None."""
+        if self._ego_points is None:
+            c = self.ego_noise.excluded(self.coarse_grid.directions)
+            self._ego_points = (c, self.ego_noise.excluded(self.fine_grid.directions)) if c.any() else ()
+        return self._ego_points or None
+
+    _ego_points: tuple | None = None
+
+    def _search(self, gcc: np.ndarray, n_eff: float, rescan: tuple[np.ndarray, float] | None = None,
+                excluded: tuple[np.ndarray, np.ndarray] | None = None
                 ) -> tuple[np.ndarray, list[tuple[float, int, float]]]:
         """Coarse-to-fine multi-source search; returns the first coarse map and (power, fine index,
         significance) of each detection.
@@ -577,7 +623,7 @@ class Localizer:
         scan (as in ODAS, Grondin and Michaud 2019), so its lobes do not hide weaker sources.
         ``rescan``: (GCC, effective bins) scanned after the first source instead of ``gcc`` if it peaks
         away from that source (found TDOAs masked the same way, the significance scaled by its own bin
-        count; see ``interference_rescan``).
+        count; see ``interference_rescan``). ``excluded``: (coarse, fine) masks of points never searched (ego-noise directions).
         The search stops at the first peak that fails the significance test (module docstring).
         """
         cfg = self.config
@@ -591,6 +637,8 @@ class Localizer:
             coarse = self._coarse.power(pooled)
             if srp_map is None:
                 srp_map = coarse
+            if excluded is not None:
+                coarse = np.where(excluded[0], -np.inf, coarse)
             if peaks:  # no second detection inside the separation cone of a found one
                 found_dirs = self.fine_grid.directions[[f for _, f, _ in peaks]]
                 coarse = np.where((self.coarse_grid.directions @ found_dirs.T).max(axis=1) > cos_sep, -np.inf, coarse)
@@ -603,6 +651,8 @@ class Localizer:
                     break
                 cols = self._refine[c]
                 p = self._fine.power(work, cols)
+                if excluded is not None:
+                    p = np.where(excluded[1][cols], -np.inf, p)
                 j = int(np.argmax(p))
                 if p[j] > best[0]:
                     best = (float(p[j]), int(cols[j]))

@@ -340,6 +340,7 @@ class _Tracks:
     last_time: np.ndarray = field(default_factory=lambda: np.zeros(0))
     n_updates: np.ndarray = field(default_factory=lambda: np.zeros(0, int))
     windows: np.ndarray = field(default_factory=lambda: np.zeros(0, int))  # windows seen since birth
+    range_m: np.ndarray = field(default_factory=lambda: np.zeros(0))  # assumed source range (translation)
 
     def __len__(self) -> int:
         return len(self.id)
@@ -373,24 +374,34 @@ class Tracker:
         self._next_key = 0
 
     def update(self, detections: Sequence[Detection], time: float,
-               rotation: np.ndarray | None = None) -> list[Track]:
+               rotation: np.ndarray | None = None, translation: np.ndarray | None = None,
+               source_range: float = 2.0) -> list[Track]:
         """Advance to window time ``time`` (s) with this window's ``detections``. Pass every window, also
         those without detections: tracks coast and age by the stream time.
 
         ``rotation``: 3x3 R mapping the PREVIOUS array frame's vectors into the CURRENT array frame
         (``v_now = R @ v_prev``), e.g. from an odometry/IMU yaw change ``dpsi``: ``R = Rz(-dpsi)``.
-        Returns the confirmed tracks, by id.
+        ``translation``: the array centre's displacement (m) since the previous window, in the CURRENT
+        array frame; each track's source, at its range (``source_range`` m when the track was born, then
+        carried along by the geometry), is then seen from the new centre: ``u <- (r u - t) / |r u - t|``,
+        its covariance through that map's Jacobian. Without it (None) a moving array's tracks lag by the
+        parallax ``|t| sin(angle) / r`` per window. Returns the confirmed tracks, by id.
         """
         z, power, level = self._measurements(detections)
         R = None if rotation is None else self._check_rotation(rotation)
+        t = None if translation is None else self._check_translation(translation)
+        if not (np.isfinite(source_range) and source_range > 0):
+            raise ValueError(f"source_range={source_range!r}: expected a finite range > 0 m")
         dt = self._advance(time)
         sigma_r = self.config.sigma_of_power(power)
         self._predict(dt, R)
+        if t is not None:
+            self._translate(t)
         pairs, w, new, innovations = self._associate(z, sigma_r, power)
         self._correct(pairs, w, innovations, power, level, time)
         self._update_activity(pairs, w, dt)
         self._delete(time)
-        self._initiate(z[new], sigma_r[new], power[new], level[new], time)
+        self._initiate(z[new], sigma_r[new], power[new], level[new], time, float(source_range))
         self._confirm()
         return self.tracks()
 
@@ -432,6 +443,30 @@ class Tracker:
         if R.shape != (3, 3) or not np.allclose(R @ R.T, np.eye(3), atol=1e-5) or np.linalg.det(R) < 0:
             raise ValueError(f"rotation: expected a 3x3 rotation matrix (orthonormal, det +1), got {R.tolist()}")
         return R
+
+    @staticmethod
+    def _check_translation(translation) -> np.ndarray:
+        t = np.asarray(translation, dtype=float)
+        if t.shape != (3,) or not np.all(np.isfinite(t)):
+            raise ValueError(f"translation: expected a finite 3-vector (m, array frame), got {translation!r}")
+        return t
+
+    def _translate(self, t: np.ndarray) -> None:
+        """Re-aim every track from an array centre moved by ``t`` (m, current array frame): see ``update``."""
+        tr = self._tracks
+        if not len(tr) or not np.any(t):
+            return
+        u, r = tr.x[:, :3], tr.range_m
+        p = r[:, None] * u - t[None]
+        d = np.maximum(np.linalg.norm(p, axis=1), 0.05)  # a source cannot be inside the array
+        u2 = p / d[:, None]
+        T = np.eye(3) - u2[:, :, None] * u2[:, None, :]
+        B = np.zeros((len(tr), 6, 6))
+        B[:, :3, :3] = T * (r / d)[:, None, None]  # d(u2)/d(u) for a source at range r
+        B[:, 3:, 3:] = T
+        x = np.concatenate([u2, tr.x[:, 3:]], axis=1)
+        tr.x, tr.P = self.model._on_sphere(x, B @ tr.P @ B.transpose(0, 2, 1))
+        tr.range_m = d
 
     def _predict(self, dt: float, rotation: np.ndarray | None) -> None:
         """Move every track into the current array frame (``rotation``), then ``dt`` s forward."""
@@ -505,7 +540,7 @@ class Tracker:
                 del self._history[int(k)]
             self._tracks = tr.select(~gone)
 
-    def _initiate(self, z, sigma_r, power, level, time: float) -> None:
+    def _initiate(self, z, sigma_r, power, level, time: float, source_range: float = 2.0) -> None:
         """Start a tentative track (no id yet) at each new-source detection."""
         m = len(z)
         if not m:
@@ -517,7 +552,7 @@ class Tracker:
             self._history[int(k)] = [(time, float(p), float(lv))]
         self._tracks = self._tracks.extend(_Tracks(
             x, P, np.zeros(m, int), keys, np.full(m, self._hit_activity()), power, level,
-            np.full(m, time), np.full(m, time), np.ones(m, int), np.ones(m, int)))
+            np.full(m, time), np.full(m, time), np.ones(m, int), np.ones(m, int), np.full(m, source_range)))
 
     def _confirm(self) -> None:
         """Give tentative tracks with ``confirm_hits`` detections the next ids."""

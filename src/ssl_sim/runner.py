@@ -210,7 +210,7 @@ class RescueRun:
         if acoustics.config.fs != sc.localizer.fs:
             raise ValueError(f"localizer.fs = {sc.localizer.fs} Hz differs from the simulated audio "
                              f"({acoustics.config.fs} Hz)")
-        self.audio = SimAudioSource(robot, acoustics, on_block=self._on_block)
+        self.audio = SimAudioSource(robot, acoustics, on_block=self._on_block, ego_noise=sc.ego_noise)
         self.drive = SimDriveBase(robot, seed=sc.seed,   # the run's seed draws the gyro's noise and drift
                                   range_layout=range_layout)
         self.clock = _TracingClock(robot, self._on_tick)

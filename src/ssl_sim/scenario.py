@@ -37,6 +37,9 @@ of the robot start in radians. Example (``ssl_sim/scenarios/paper_lab.toml``)::
     level_db_spl = 30.0
     spectrum = "hvac"
 
+    [ego_noise]              # the drive's own motors while the wheels turn (ssl_sim.acoustics.ego_noise
+    level_db_spl_1m = 40.0   # EgoNoiseConfig fields; on by default, enabled = false for a silent drive)
+
     [acoustics]              # AcousticConfig fields: rt60_s, ism_order, max_rir_s, late_reverb, ...
     [localizer]              # ssl_core LocalizerConfig fields
     [behaviour]              # robot.rescue RescueConfig fields (decisions)
@@ -69,6 +72,7 @@ from ssl_core.gcc_phat import band_bins
 from ssl_core.geometry import cube8
 from ssl_core.localizer import LocalizerConfig, check_table_memory
 from ssl_sim.acoustics import AcousticConfig, AmbientNoise, SoundSource, noise_source
+from ssl_sim.acoustics.ego_noise import EgoNoiseConfig
 from ssl_sim.acoustics.signals import LoopedSignal
 from ssl_sim.acoustics.sources import PAPER_LEVEL_DB_SPL
 from ssl_sim.acoustics.voices import SPEAKERS, VICTIM_SOUNDS, continuous_voice, victim_voice
@@ -152,6 +156,9 @@ class Scenario:
     success_radius_m: float = 0.75
     robot_start: tuple[float, float, float] | None = None
     noise: AmbientNoise | None = field(default_factory=AmbientNoise)
+    # The drive's own motor noise while the wheels turn (part of the world: on unless the scenario says
+    # ``[ego_noise] enabled = false``); its level ``level_db_spl_1m`` and spectrum are EgoNoiseConfig fields.
+    ego_noise: EgoNoiseConfig | None = field(default_factory=EgoNoiseConfig)
     acoustics: dict[str, Any] = field(default_factory=dict)
     localizer: LocalizerConfig = field(default_factory=LocalizerConfig)
     behaviour: RescueConfig = field(default_factory=RescueConfig)
@@ -264,7 +271,7 @@ class Scenario:
         seed = self.seed if seed is None else seed
         world = world if world is not None else self.world(seed)
         return make_sim_hal(world, sources=self.sources(world, seed, fs=self.localizer.fs),
-                            acoustic_config=self.acoustic_config(seed))
+                            acoustic_config=self.acoustic_config(seed), ego_noise=self.ego_noise)
 
 
 _SPEAKER_CYCLE = ("male", "female", "male_low", "female_high", "child", "elderly_male", "male_high", "female_low")
@@ -360,7 +367,7 @@ def _resample(x: np.ndarray, fs_in: int, fs_out: int) -> np.ndarray:
 # ----------------------------------------------------------------------------- parsing
 _TOP_KEYS = {"name", "description", "seed", "time_limit_s", "success_radius_m", "scene", "robot", "victims",
              "interferers", "noise", "acoustics", "localizer", "behaviour", "motion", "sound_map", "planner",
-             "occupancy", "coverage"}
+             "occupancy", "coverage", "ego_noise"}
 
 
 def scenario_names() -> list[str]:
@@ -437,6 +444,14 @@ def parse_scenario(data: dict, base_dir: str | Path = ".", path: str = "") -> Sc
         noise = None
     else:
         noise = _dataclass(AmbientNoise, {k: v for k, v in noise_t.items() if k != "enabled"}, "noise", where)
+    ego_t = _table(data, "ego_noise", where)
+    if ego_t.get("enabled", True) is False:
+        _no_unknown(ego_t, {"enabled"}, "ego_noise", where)
+        ego_noise = None
+    else:
+        if "enabled" in ego_t and ego_t["enabled"] is not True:
+            raise err(f"ego_noise.enabled: expected true or false, got {ego_t['enabled']!r}")
+        ego_noise = _dataclass(EgoNoiseConfig, {k: v for k, v in ego_t.items() if k != "enabled"}, "ego_noise", where)
     acoustics_t = _table(data, "acoustics", where)
     _no_unknown(acoustics_t, set(ACOUSTIC_FIELDS), "acoustics", where)
     acoustics = _typed_kwargs(AcousticConfig, acoustics_t, "acoustics", where)
@@ -458,7 +473,7 @@ def parse_scenario(data: dict, base_dir: str | Path = ".", path: str = "") -> Sc
                                ("occupancy", OccupancyConfig), ("coverage", CoverageConfig))}
     return Scenario(name=name, scene=scene, victims=victims, interferers=interferers,
                     description=_get(data, "description", str, where, default=""), seed=seed,
-                    time_limit_s=time_limit, success_radius_m=radius, robot_start=start, noise=noise,
+                    time_limit_s=time_limit, success_radius_m=radius, robot_start=start, noise=noise, ego_noise=ego_noise,
                     acoustics=acoustics, localizer=localizer, behaviour=behaviour, path=str(path), **stages)
 
 

@@ -76,6 +76,9 @@ class EnvConfig:
     noise_db_spl: float = 35.0          # diffuse ambient noise at the array
     victim_level_db_spl: float = 65.0   # at 1 m while calling
     victim_sound: str = "continuous"
+    # The drive's motor noise at 1 m of one motor at rated speed (ssl_sim.acoustics.ego_noise); None: a silent
+    # drive. A scenario brings its own ([ego_noise]).
+    ego_noise_db_spl: float | None = 40.0
     # -- timing (s) -------------------------------------------------------------------------------
     control_s: float = 0.5
     settle_s: float = 0.1
@@ -114,6 +117,9 @@ class EnvConfig:
              "None or 0..5 s")
         need(0 <= self.min_start_distance_m <= 20, "min_start_distance_m", "0..20 m")
         need(-40 <= self.noise_db_spl <= 120, "noise_db_spl", "-40..120 dB SPL")
+        need(self.ego_noise_db_spl is None or (math.isfinite(self.ego_noise_db_spl)
+                                               and -20 <= self.ego_noise_db_spl <= 100),
+             "ego_noise_db_spl", "None or -20..100 dB SPL at 1 m")
         need(0 <= self.victim_level_db_spl <= 130, "victim_level_db_spl", "0..130 dB SPL at 1 m")
         need(0 < self.control_s <= 5, "control_s", "0 < s <= 5")
         need(0 <= self.settle_s <= 2, "settle_s", "0..2 s")

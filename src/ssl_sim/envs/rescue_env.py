@@ -64,6 +64,7 @@ from robot.odometry import Odometry, wrap_angle
 from robot.vad import SileroVad
 from ssl_core.localizer import Localizer, LocalizerConfig
 from ssl_sim.acoustics import AcousticConfig, AcousticSimulator, AmbientNoise
+from ssl_sim.acoustics.ego_noise import EgoNoiseConfig
 from ssl_sim.backends import SimAudioSource
 from ssl_sim.envs.config import FIDELITY_ACOUSTICS, EnvConfig
 from ssl_sim.envs.navigation import GeodesicMap
@@ -217,6 +218,7 @@ class SSLRescueEnv(gym.Env):
                 order = min(ac.ism_order, FIDELITY_ACOUSTICS[cfg.fidelity]["ism_order"])
                 ac = replace(ac, ism_order=order, noise_loop_s=FIDELITY_ACOUSTICS[cfg.fidelity].get("noise_loop_s"))
                 found_radius = sc.success_radius_m
+                ego = sc.ego_noise
             else:
                 if cfg.scene is not None:
                     world = load_scene(cfg.scene)
@@ -228,9 +230,10 @@ class SSLRescueEnv(gym.Env):
                 ac = AcousticConfig(seed=acoustic_seed, rt60_s=cfg.rt60_s,
                                     ambient=AmbientNoise(cfg.noise_db_spl, "hvac"), **FIDELITY_ACOUSTICS[cfg.fidelity])
                 found_radius = cfg.found_radius_m
+                ego = None if cfg.ego_noise_db_spl is None else EgoNoiseConfig(level_db_spl_1m=cfg.ego_noise_db_spl)
             robot = SimRobot(world)
             acoustics = AcousticSimulator(world, ac, sources)
-        audio = SimAudioSource(robot, acoustics)
+        audio = SimAudioSource(robot, acoustics, ego_noise=ego)
         geo = GeodesicMap(world, found_radius)
         start = world.robot_start[:2]
         return _Episode(world, len(world.victims), robot, acoustics, audio, geo, list(sources), found_radius,
