@@ -13,7 +13,8 @@ generator); diffuse noise of 30-50 dB SPL; an RT60 of 0.3-1.2 s; the robot's sta
 **Splits.** ``train`` scenario ``i`` has the suite seed ``i`` (any ``0 <= i < TEST_SEED_BASE``); ``test`` is the
 fixed list ``test_indices()`` (``TEST_SIZE`` scenarios) with suite seeds ``TEST_SEED_BASE + i``: the two seed
 ranges are disjoint, so no train index can draw a test scenario. The generator's random stream is
-``SeedSequence([SUITE_VERSION, suite seed, attempt])``, and the suite seed is also the scenario's run seed
+``SeedSequence([SUITE_VERSION, suite seed, attempt])`` (the numbers of victims and interferers come from
+``SeedSequence([SUITE_VERSION, suite seed])`` and stay across attempts), and the suite seed is also the scenario's run seed
 (voices, noise, sensor). Real recordings come from the sound set's ``dev`` part for ``train`` and from its
 ``test`` part for ``test`` (``ssl_sim.acoustics.sound_set``: no speaker or machine is in both). Behaviour
 parameters are chosen on ``train``; ``test`` is reported, never tuned on (docs/design/benchmark.md).
@@ -202,8 +203,7 @@ def _victims(rng: np.random.Generator, world: World, part: str) -> list[dict[str
     return out
 
 
-def _interferers(rng: np.random.Generator, world: World, part: str) -> list[dict[str, Any]]:
-    n = int(rng.choice([0, 1, 2], p=[0.3, 0.45, 0.25]))
+def _interferers(rng: np.random.Generator, world: World, part: str, n: int) -> list[dict[str, Any]]:
     used: set[Path] = set()
     L = np.asarray(world.room.size)
     start = np.asarray(world.robot_start[:2])
@@ -237,13 +237,13 @@ def _time_limit_s(size: tuple[float, float, float], n_victims: int) -> float:
     return float(min(300.0, round(180.0 + 1.5 * max(0.0, area - 16.0) + 20.0 * (n_victims - 1))))
 
 
-def _draw(split: str, index: int, rng: np.random.Generator) -> tuple[dict[str, Any], World]:
+def _draw(split: str, index: int, rng: np.random.Generator, n_victims: int,
+          n_interferers: int) -> tuple[dict[str, Any], World]:
     """One attempt: the scenario's TOML table (without [scene]) and its World (scene with victim sites)."""
     family = FAMILIES[index % len(FAMILIES)]
     lx = round(float(rng.uniform(4.0, 10.0)), 1)
     ly = round(float(rng.uniform(4.0, min(8.0, lx))), 1)
     size = (lx, ly, round(float(rng.uniform(2.6, 3.2)), 1))
-    n_victims = int(rng.choice([1, 2, 3], p=[0.3, 0.4, 0.3]))
     cfg = _scene_config(family, rng, size, n_victims)
     try:
         world = generate_world(cfg, seed=int(rng.integers(2**31)), name=_name(split, index))
@@ -257,7 +257,7 @@ def _draw(split: str, index: int, rng: np.random.Generator) -> tuple[dict[str, A
         raise _Reject("two victims too close")
     part = SOUND_PART[split]
     victims = _victims(rng, world, part)
-    interferers = _interferers(rng, world, part)
+    interferers = _interferers(rng, world, part, n_interferers)
     rt60 = round(float(rng.uniform(0.3, 1.2)), 2)
     noise = {"level_db_spl": round(float(rng.uniform(30.0, 50.0)), 1), "spectrum": str(rng.choice(_NOISE_SPECTRA))}
     seed = suite_seed(split, index)
@@ -285,11 +285,16 @@ def generate(split: str, index: int) -> Scenario:
     """Scenario ``index`` of ``split``: the same arguments always give the same Scenario. Its scene is held in
     memory (``scene.world``); the loader's checks have passed (see the module docstring)."""
     seed = suite_seed(split, index)
+    # How many victims and interferers is fixed by the seed (a redrawn attempt keeps them: the split's mix stays
+    # as designed instead of drifting to the easier draws)
+    design = np.random.default_rng(np.random.SeedSequence([SUITE_VERSION, seed]))
+    n_victims = int(design.choice([1, 2, 3], p=[0.3, 0.4, 0.3]))
+    n_interferers = int(design.choice([0, 1, 2], p=[0.3, 0.45, 0.25]))
     reasons = []
     for attempt in range(MAX_ATTEMPTS):
         rng = np.random.default_rng(np.random.SeedSequence([SUITE_VERSION, seed, attempt]))
         try:
-            data, world = _draw(split, index, rng)
+            data, world = _draw(split, index, rng, n_victims, n_interferers)
             return _validated(data, world)
         except (_Reject, ScenarioError) as exc:
             reasons.append(str(exc))
