@@ -121,7 +121,7 @@ class _Builder:
         self.cfg, self.rng = cfg, rng
         self.L = np.asarray(cfg.room_size, float)
         self.boxes: list[Box] = []
-        self._fp_n = -1  # number of boxes the footprint arrays below describe
+        self._fp_n = 0   # number of boxes the footprint arrays below describe (boxes are only ever appended)
         self._fp_xy = np.zeros((0, 2))
         self._fp_r = np.zeros(0)
 
@@ -149,8 +149,9 @@ class _Builder:
         ha = np.asarray(size[:2], float) / 2 + clearance
         ra = _rot2(yaw)
         if self._fp_n != len(self.boxes):
-            self._fp_xy = np.array([b.center[:2] for b in self.boxes], float).reshape(-1, 2)
-            self._fp_r = np.array([np.hypot(b.size[0], b.size[1]) / 2 for b in self.boxes], float)
+            new = self.boxes[self._fp_n:] if self._fp_n >= 0 else self.boxes
+            self._fp_xy = np.concatenate([self._fp_xy, np.array([b.center[:2] for b in new], float).reshape(-1, 2)])
+            self._fp_r = np.concatenate([self._fp_r, [np.hypot(b.size[0], b.size[1]) / 2 for b in new]])
             self._fp_n = len(self.boxes)
         # Footprints whose bounding circles lie apart (1 um slack) cannot overlap: only the others get the
         # exact separating-axis test (the same decisions, a fraction of the work in crowded rooms).
