@@ -210,3 +210,21 @@ def test_a_generated_test_scenario_runs_end_to_end(written):
     errs = np.asarray(r["detection_errors_deg"])
     # (a random direction lies a median 54 deg from the nearest of three random sources, less with more)
     assert errs.size >= 5 and np.median(errs) < 30.0
+
+
+def test_cli_suite_show_writes_a_rerunnable_file_and_list_prints_the_split(written, tmp_path, capsys):
+    from ssl_sim.cli import main
+
+    gen, _, _ = written
+    assert main(["suite", "show", "test", "17", "--out", str(tmp_path)]) == 0
+    path = tmp_path / f"{gen['test', 17].name}.toml"
+    assert _as_generated(load_scenario(path)) == gen["test", 17]
+    assert main(["suite", "list", "train", "--count", "2"]) == 0
+    out = capsys.readouterr().out
+    assert gen["train", 0].name in out and gen["train", 1].name in out and gen["train", 2].name not in out
+    assert main(["suite", "show", "test", str(suite.TEST_SIZE), "--out", str(tmp_path)]) == 2
+    assert "index" in capsys.readouterr().err
+    with pytest.raises(ValueError, match="split"):
+        sound_files("train")
+    with pytest.raises(ValueError, match="category"):
+        sound_files("dev", "sirens")
