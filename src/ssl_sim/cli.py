@@ -56,7 +56,8 @@ def _sweep(args: argparse.Namespace) -> int:
         from ssl_sim.suite import scenarios
 
         if args.scenarios:
-            raise ValueError(f"sweep: give scenarios or --suite, not both (got {args.scenarios} and --suite {args.suite})")
+            raise ValueError(f"sweep: give scenarios or --suite, not both (got {args.scenarios} and "
+                             f"--suite {args.suite})")
         seeds = parse_seeds(args.seeds) if args.seeds is not None else None  # None: each its own seed
         check_output_dir(args.out, "--out")
         todo = scenarios(args.suite, args.count)

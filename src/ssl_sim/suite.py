@@ -14,8 +14,8 @@ generator); diffuse noise of 30-50 dB SPL; an RT60 of 0.3-1.2 s; the robot's sta
 fixed list ``test_indices()`` (``TEST_SIZE`` scenarios) with suite seeds ``TEST_SEED_BASE + i``: the two seed
 ranges are disjoint, so no train index can draw a test scenario. The generator's random stream is
 ``SeedSequence([SUITE_VERSION, suite seed, attempt])`` (the numbers of victims and interferers come from
-``SeedSequence([SUITE_VERSION, suite seed])`` and stay across attempts), and the suite seed is also the scenario's run seed
-(voices, noise, sensor). Real recordings come from the sound set's ``dev`` part for ``train`` and from its
+``SeedSequence([SUITE_VERSION, suite seed])`` and stay across attempts), and the suite seed is also the scenario's
+run seed (voices, noise, sensor). Real recordings come from the sound set's ``dev`` part for ``train`` and from its
 ``test`` part for ``test`` (``ssl_sim.acoustics.sound_set``: no speaker or machine is in both). Behaviour
 parameters are chosen on ``train``; ``test`` is reported, never tuned on (docs/design/benchmark.md).
 
@@ -59,7 +59,8 @@ from ssl_sim.scenario import Scenario, ScenarioError, SceneSpec, load_scenario
 from ssl_sim.world import World
 
 __all__ = ["SPLITS", "FAMILIES", "TEST_SIZE", "TEST_SEED_BASE", "SUITE_VERSION", "suite_seed", "test_indices",
-           "family_of", "generate", "indices", "scenarios", "summary_row", "to_toml", "write_scenario", "write_scenarios"]
+           "family_of", "generate", "indices", "scenarios", "summary_row", "to_toml", "write_scenario",
+           "write_scenarios"]
 
 SPLITS = ("train", "test")
 FAMILIES = ("light_rubble", "dense_collapsed", "partitions", "voids")
@@ -72,7 +73,7 @@ SUITE_VERSION = 1
 #: Which part of the real sound set each split draws from.
 SOUND_PART = {"train": "dev", "test": "test"}
 
-FIND_BASE_RADIUS_M = 1.5        # a find needs the robot's base this close to her: some floor this close must be reachable
+FIND_BASE_RADIUS_M = 1.5        # a find needs the robot's base this close to her: floor this close must be reachable
 MIN_START_DISTANCE_M = 2.0      # no victim found from the start without moving
 MIN_VICTIM_SPACING_M = 1.2      # two victims never within one 0.5 m report radius of each other
 MIN_INTERFERER_DISTANCE_M = 1.5
@@ -320,7 +321,7 @@ def _validated(data: dict[str, Any], world: World) -> Scenario:
 
 
 def scenarios(split: str, count: int | None = None) -> list[Scenario]:
-    """The first ``count`` scenarios of ``split`` (test: default and at most all TEST_SIZE; train: default TEST_SIZE)."""
+    """The first ``count`` scenarios of ``split`` (test: default and at most TEST_SIZE; train: default TEST_SIZE)."""
     return [generate(split, i) for i in indices(split, count)]
 
 
@@ -340,7 +341,8 @@ def summary_row(sc: Scenario) -> dict[str, Any]:
     """What ``ssl-rescue suite list`` shows of a suite scenario."""
     world = sc.world()
     return {"name": sc.name, "family": family_of(sc.name), "room_m": f"{world.room.size[0]:g}x{world.room.size[1]:g}",
-            "victims": len(sc.victims), "victim_sounds": ",".join(f"rec_{Path(v.file).parent.name}" if v.sound == "file" else v.sound
+            "victims": len(sc.victims),
+            "victim_sounds": ",".join(f"rec_{Path(v.file).parent.name}" if v.sound == "file" else v.sound
                                       for v in sc.victims),
             "buried_max": max((v.buried or 0.0) for v in sc.victims),
             "interferers": len(sc.interferers),
@@ -370,7 +372,8 @@ def _scenario_table(sc: Scenario) -> dict[str, Any]:
         data["robot"] = {"start": list(sc.robot_start)}
     vs = []
     for v in sc.victims:
-        t: dict[str, Any] = {"position": list(v.position)} if v.position is not None else {"scene_victim": v.scene_victim}
+        t: dict[str, Any] = ({"position": list(v.position)} if v.position is not None
+                             else {"scene_victim": v.scene_victim})
         t.update(sound=v.sound)
         if v.speaker is not None:
             t["speaker"] = v.speaker
@@ -390,7 +393,8 @@ def _scenario_table(sc: Scenario) -> dict[str, Any]:
     data["noise"] = ({"enabled": False} if sc.noise is None
                      else {"level_db_spl": sc.noise.level_db_spl, "spectrum": sc.noise.spectrum})
     data["acoustics"] = dict(sc.acoustics)
-    defaults = {"localizer": LocalizerConfig(), "behaviour": RescueConfig(array_height_m=RobotModelConfig().array_height),
+    defaults = {"localizer": LocalizerConfig(),
+                "behaviour": RescueConfig(array_height_m=RobotModelConfig().array_height),
                 "motion": MotionConfig(), "sound_map": SoundMapConfig(), "planner": PlannerConfig(),
                 "occupancy": OccupancyConfig(), "coverage": CoverageConfig()}
     for key, default in defaults.items():

@@ -52,7 +52,8 @@ def _catalogue(sounds_dir: Path) -> tuple[SoundFile, ...]:
         rows = csv.DictReader((line for line in f if not line.startswith("#")), delimiter="\t")
         for k, r in enumerate(rows):
             if r["split"] not in SOUND_SPLITS:
-                raise ValueError(f"{provenance}: row {k + 1}: split: expected one of {SOUND_SPLITS}, got {r['split']!r}")
+                raise ValueError(f"{provenance}: row {k + 1}: split: expected one of {SOUND_SPLITS}, "
+                                 f"got {r['split']!r}")
             path = (sounds_dir / r["file"]).resolve()
             if not path.is_file():
                 raise FileNotFoundError(f"{provenance}: row {k + 1}: file {r['file']} not found under {sounds_dir}")

@@ -149,7 +149,7 @@ class _Builder:
         ha = np.asarray(size[:2], float) / 2 + clearance
         ra = _rot2(yaw)
         if self._fp_n != len(self.boxes):
-            new = self.boxes[self._fp_n:] if self._fp_n >= 0 else self.boxes
+            new = self.boxes[self._fp_n:]
             self._fp_xy = np.concatenate([self._fp_xy, np.array([b.center[:2] for b in new], float).reshape(-1, 2)])
             self._fp_r = np.concatenate([self._fp_r, [np.hypot(b.size[0], b.size[1]) / 2 for b in new]])
             self._fp_n = len(self.boxes)
@@ -199,7 +199,7 @@ class _Builder:
         min_depth = 1.6
         if span < (n + 1) * min_depth + n * thick:
             return False
-        # positions along the long axis: equal compartments jittered, each at least min_depth deep
+        # positions along the long axis: every compartment min_depth deep plus a random share of the spare depth
         slack = span - (n + 1) * min_depth - n * thick
         cuts = np.sort(self.rng.uniform(0.0, slack, n))
         pos = [min_depth * (k + 1) + thick * k + thick / 2 + cuts[k] for k in range(n)]
