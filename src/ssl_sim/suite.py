@@ -1,7 +1,7 @@
 """Generated scenario suites: complete rescue scenarios drawn from a seed, in a ``train`` and a held-out ``test`` split.
 
     sc = generate("test", 17)                     # a validated ssl_sim.scenario.Scenario
-    write_scenario("test", 17, "out/suite")       # out/suite/test_017_partitions.toml + scenes/...: ssl-rescue run PATH
+    write_scenario("test", 17, "out/suite")       # out/suite/test_017_dense_collapsed.toml (+ scenes/): run PATH
     write_scenarios("train", "out/train", count=32)
 
 A scenario is drawn whole from its seed: a scene family (``FAMILIES``: light rubble, a dense collapsed room,
