@@ -6,15 +6,14 @@ mostly the silence between two prompts is not asked to count as speech.
 """
 from __future__ import annotations
 
-import csv
 from dataclasses import dataclass
-from pathlib import Path
 
 import numpy as np
 from scipy.io import wavfile
 
+from ssl_sim.acoustics.sound_set import SPEECH_CATEGORIES, sound_files
 from ssl_sim.resources import SOUNDS_DIR as DATA
-SPEECH_CATEGORIES = ("speech", "shouts")
+
 FS = 16000
 CHUNK_S, HOP_S = 1.0, 0.5
 _FRAME = 512          # 32 ms energy frames for the truth labels
@@ -36,20 +35,13 @@ class Recording:
 
 
 def recordings(split: str) -> list[Recording]:
-    """All recordings of ``split`` ('dev' or 'test') listed in PROVENANCE."""
-    if split not in ("dev", "test"):
-        raise ValueError(f"split: expected 'dev' or 'test', got {split!r}")
+    """All recordings of ``split`` ('dev' or 'test') listed in PROVENANCE (ssl_sim.acoustics.sound_set)."""
     out = []
-    with open(DATA / "PROVENANCE") as f:
-        rows = csv.DictReader((line for line in f if not line.startswith("#")), delimiter="\t")
-        for r in rows:
-            if r["split"] != split:
-                continue
-            fs, x = wavfile.read(DATA / r["file"])
-            if fs != FS or x.ndim != 1:
-                raise ValueError(f"{r['file']}: expected 16 kHz mono, got {fs} Hz shape {x.shape}")
-            out.append(Recording(split, r["category"], Path(r["file"]).stem, x.astype(np.float64) / 32768.0,
-                                 r["speaker_sex"]))
+    for r in sound_files(split):
+        fs, x = wavfile.read(r.path)
+        if fs != FS or x.ndim != 1:
+            raise ValueError(f"{r.path}: expected 16 kHz mono, got {fs} Hz shape {x.shape}")
+        out.append(Recording(split, r.category, r.name, x.astype(np.float64) / 32768.0, r.speaker_sex))
     return out
 
 

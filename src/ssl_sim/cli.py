@@ -6,6 +6,9 @@
     ssl-rescue run scenarios/light_rubble_three.toml --rerun spawn
     ssl-rescue sweep paper_lab light_rubble_three --seeds 0:20 --out out/sweep
     ssl-rescue sweep dense_pump --seeds 0:100 --cluster tcp://scheduler:8786
+    ssl-rescue suite list test                                   # the generated test split
+    ssl-rescue suite show test 17 --out out/suite                # its scenario file: ssl-rescue run PATH
+    ssl-rescue sweep --suite test --out out/test                 # the whole test split, each with its own seed
 """
 from __future__ import annotations
 
@@ -77,10 +80,23 @@ def _sweep(args: argparse.Namespace) -> int:
     from ssl_sim.runner import output_dir
     from ssl_sim.sweep import markdown_table, parse_seeds, run_sweep, summarize, write_tables
 
-    seeds = parse_seeds(args.seeds)
+    if args.suite is not None:
+        from ssl_sim.suite import scenarios
+
+        if args.scenarios:
+            raise ValueError(f"sweep: give scenarios or --suite, not both (got {args.scenarios} and "
+                             f"--suite {args.suite})")
+        seeds = parse_seeds(args.seeds) if args.seeds is not None else None  # None: each its own seed
+    else:
+        if not args.scenarios:
+            raise ValueError("sweep: expected scenario names or .toml files, or --suite train|test")
+        if args.count is not None:
+            raise ValueError("sweep: --count only goes with --suite")
+        seeds = parse_seeds(args.seeds if args.seeds is not None else "0:10")
     _checked_models()
     with output_dir(args.out, "--out"):  # checked now, not after the whole sweep; removed again if it is refused
-        rows = run_sweep(args.scenarios, seeds, cluster=args.cluster, workers=args.workers,
+        todo = scenarios(args.suite, args.count) if args.suite is not None else args.scenarios
+        rows = run_sweep(todo, seeds, cluster=args.cluster, workers=args.workers,
                          time_limit_s=args.time_limit, progress=not args.quiet)
         tables = summarize(rows)
         paths = write_tables(rows, tables, args.out)
@@ -112,6 +128,30 @@ def _record(args: argparse.Namespace) -> int:
           f"{rt['scene_materials'][k]:.2f} s)")
     print(f"try: ssl-locate {out} --array cube8 --sources {max(1, len(truth['sources']))}")
     return 130 if truth["interrupted"] else 0
+
+
+def _suite_list(args: argparse.Namespace) -> int:
+    from ssl_sim.suite import generate, indices, summary_row
+
+    print(f"{'index':>5}  {'name':<26}{'room m':>9}  {'vict':>4}  {'sounds':<30}{'buried':>6}  {'intf':>4}  "
+          f"{'interferer kinds':<20}{'RT60 s':>7}{'noise dB':>9}{'limit s':>8}")
+    for i in indices(args.split, args.count):
+        r = summary_row(generate(args.split, i))
+        print(f"{i:>5}  {r['name']:<26}{r['room_m']:>9}  {r['victims']:>4}  {r['victim_sounds']:<30}"
+              f"{r['buried_max']:>6.2f}  {r['interferers']:>4}  {r['interferer_kinds']:<20}{r['rt60_s']:>7.2f}"
+              f"{r['noise_db_spl']:>9.1f}{r['time_limit_s']:>8.0f}")
+    return 0
+
+
+def _suite_show(args: argparse.Namespace) -> int:
+    from ssl_sim.suite import generate, summary_row, write_scenario
+
+    path = write_scenario(args.split, args.index, args.out)
+    r = summary_row(generate(args.split, args.index))
+    print(path.read_text())
+    print(f"# {r['family']}, {r['room_m']} m, {r['victims']} victim(s), {r['interferers']} interferer(s)")
+    print(f"wrote {path} and {Path(args.out) / 'scenes' / (r['name'] + '.toml')}; rerun: ssl-rescue run {path}")
+    return 0
 
 
 def _list(args: argparse.Namespace) -> int:
@@ -151,8 +191,14 @@ def build_parser() -> argparse.ArgumentParser:
     r.set_defaults(func=_run)
 
     s = sub.add_parser("sweep", help="run scenarios x seeds in parallel (local processes or a Dask cluster)")
-    s.add_argument("scenarios", nargs="+", help="shipped scenario names or .toml files")
-    s.add_argument("--seeds", default="0:10", help="START:STOP[:STEP] (stop exclusive), a comma list or one seed")
+    s.add_argument("scenarios", nargs="*", help="shipped scenario names or .toml files")
+    s.add_argument("--suite", choices=("train", "test"), default=None,
+                   help="run a generated suite split instead (each scenario once with its own seed)")
+    s.add_argument("--count", type=int, default=None,
+                   help="with --suite: its first N scenarios (default: all 64 of test, 64 of train)")
+    s.add_argument("--seeds", default=None,
+                   help="START:STOP[:STEP] (stop exclusive), a comma list or one seed (default 0:10; "
+                        "with --suite: each scenario's own seed)")
     s.add_argument("--cluster", default=None, metavar="tcp://HOST:PORT",
                    help="Dask scheduler address (needs the 'cluster' extra); default: local processes")
     s.add_argument("--workers", type=int, default=None, help="local worker processes (default: CPU count)")
@@ -172,6 +218,18 @@ def build_parser() -> argparse.ArgumentParser:
 
     ls = sub.add_parser("list", help="list the shipped scenarios")
     ls.set_defaults(func=_list)
+
+    su = sub.add_parser("suite", help="generated scenario suites (train / held-out test split)")
+    su_sub = su.add_subparsers(dest="suite_command", required=True)
+    sl = su_sub.add_parser("list", help="list a split's scenarios (family, room, victims, interferers, RT60, noise)")
+    sl.add_argument("split", nargs="?", default="test", choices=("train", "test"), help="default test")
+    sl.add_argument("--count", type=int, default=None, help="the first N (default: all 64 of test, 64 of train)")
+    sl.set_defaults(func=_suite_list)
+    ss = su_sub.add_parser("show", help="write one scenario's TOML (and its scene) so that it can be rerun")
+    ss.add_argument("split", choices=("train", "test"))
+    ss.add_argument("index", type=int)
+    ss.add_argument("--out", default="out/suite", help="directory (default out/suite); scene under OUT/scenes/")
+    ss.set_defaults(func=_suite_show)
     return p
 
 

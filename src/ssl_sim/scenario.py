@@ -98,14 +98,16 @@ class ScenarioError(ValueError):
 # ----------------------------------------------------------------------------- specs
 @dataclass(frozen=True)
 class SceneSpec:
-    """Which World: exactly one of ``name`` (shipped scene), ``file`` (World TOML, absolute path)
-    or ``generate`` (``scene_gen.PRESETS`` key, with ``seed``; None = the run seed)."""
+    """Which World: exactly one of ``name`` (shipped scene), ``file`` (World TOML, absolute path),
+    ``generate`` (``scene_gen.PRESETS`` key, with ``seed``; None = the run seed) or ``world`` (a World
+    object held in memory, as ``ssl_sim.suite`` makes them; in a file it is ``file``)."""
 
     name: str | None = None
     file: str | None = None
     generate: str | None = None
     seed: int | None = None
     use_scene_victims: bool | None = None  # None: only when the scenario lists no victims
+    world: World | None = None
 
 
 @dataclass(frozen=True)
@@ -201,6 +203,8 @@ class Scenario:
                 base = load_scene(sc.name)
             elif sc.file is not None:
                 base = load_scene(sc.file)
+            elif sc.world is not None:
+                base = sc.world
             else:
                 base = generate_world(PRESETS[sc.generate], seed=sc.seed if sc.seed is not None else seed,
                                       name=f"{sc.generate}_{sc.seed if sc.seed is not None else seed}")

@@ -89,23 +89,24 @@ def _as_completed(executor, futures):
     return cf.as_completed(futures)
 
 
-def run_sweep(scenarios: Sequence[Scenario | str | Path], seeds: Iterable[int], *, executor=None,
+def run_sweep(scenarios: Sequence[Scenario | str | Path], seeds: Iterable[int] | None, *, executor=None,
               cluster: str | None = None, workers: int | None = None, time_limit_s: float | None = None,
               progress: bool = False) -> list[dict[str, Any]]:
-    """Run every scenario with every seed; returns run rows in (scenario, seed) order.
+    """Run every scenario with every seed (``seeds=None``: each once with its own seed, as a generated suite
+    runs); returns run rows in (scenario, seed) order.
 
     ``executor``: an existing ``concurrent.futures.Executor`` or ``distributed.Client`` to use.
     Otherwise ``cluster`` (``tcp://HOST:PORT`` of a Dask scheduler) connects a Client, or else a
     local ProcessPoolExecutor with ``workers`` processes (default: CPU count) is started."""
     scs = [s if isinstance(s, Scenario) else load_scenario(s) for s in scenarios]
     scs = [s.with_overrides(time_limit_s=time_limit_s) for s in scs]
-    seeds = list(seeds)
-    if not scs or not seeds:
+    seeds = list(seeds) if seeds is not None else None
+    if not scs or seeds == []:
         raise ValueError("run_sweep: need at least one scenario and one seed")
     # Build (and validate) every run's World here: errors surface before any work is sent.
     tasks = []
     for s in scs:
-        for seed in seeds:
+        for seed in (seeds if seeds is not None else [s.seed]):
             try:
                 tasks.append((s, seed, s.world(seed)))
             except ScenarioError as exc:

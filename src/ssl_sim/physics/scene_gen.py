@@ -5,6 +5,7 @@ into the MuJoCo scene and the acoustic simulator reads the same boxes. All numbe
 are rounded to 1 mm (0.1 mrad for yaw) so a scene survives a TOML round trip exactly.
 
 What a scene holds (world frame, metres, floor z = 0):
+- full-height partitions across the room with doorways (compartments the robot enters through them),
 - pillars (full height) and broken interior wall segments,
 - big debris the robot must go around: concrete slabs lying flat and blocks, some
   stacked on others, and "voids" (a slab resting on two blocks) a victim can lie under,
@@ -49,6 +50,8 @@ class RubbleConfig:
     slab_size: tuple[Range, Range, Range] = ((0.5, 1.3), (0.4, 0.9), (0.08, 0.18))
     debris_size: tuple[Range, Range] = ((0.06, 0.3), (0.05, 0.2))   # footprint length, width
     debris_height: Range = (0.005, 0.02)  # climbable: top at most 2 cm
+    n_partitions: int = 0                  # full-height walls across the room (parallel), each with a doorway
+    doorway_width: Range = (0.8, 1.2)
     n_walls: int = 0                       # broken interior wall segments
     wall_length: Range = (0.8, 2.2)
     wall_height: Range = (0.4, 1.6)
@@ -73,7 +76,7 @@ class RubbleConfig:
             v = getattr(self, name)
             if not 0.0 <= v < 0.6:
                 raise ValueError(f"rubble.{name}: expected a fraction in [0, 0.6), got {v}")
-        for name in ("n_walls", "n_pillars", "n_voids", "n_victims"):
+        for name in ("n_partitions", "n_walls", "n_pillars", "n_voids", "n_victims"):
             if getattr(self, name) < 0:
                 raise ValueError(f"rubble.{name}: expected >= 0, got {getattr(self, name)}")
         lo, hi = self.debris_height
@@ -83,6 +86,10 @@ class RubbleConfig:
         if bad or not self.victim_modes:
             raise ValueError("rubble.victim_modes: expected some of ('on', 'beside', 'under'), "
                              f"got {self.victim_modes}")
+        lo, hi = self.doorway_width
+        if not 2 * ROBOT_RADIUS + 0.2 <= lo <= hi:
+            raise ValueError(f"rubble.doorway_width: expected {2 * ROBOT_RADIUS + 0.2:.2f} m <= low <= high "
+                             f"(the robot must pass), got {self.doorway_width}")
         if min(self.room_size[:2]) < 2 * (ROBOT_RADIUS + self.start_clearance) + 0.2:
             raise ValueError(f"rubble.room_size: room too small for the robot, got {self.room_size}")
 
@@ -114,6 +121,9 @@ class _Builder:
         self.cfg, self.rng = cfg, rng
         self.L = np.asarray(cfg.room_size, float)
         self.boxes: list[Box] = []
+        self._fp_n = 0   # number of boxes the footprint arrays below describe (boxes are only ever appended)
+        self._fp_xy = np.zeros((0, 2))
+        self._fp_r = np.zeros(0)
 
     # -- placement helpers ---------------------------------------------------------------
     def box(self, xy, bottom: float, size, yaw, material, kind, climbable=False) -> Box:
@@ -138,7 +148,16 @@ class _Builder:
         ``clearance`` overlaps the footprint of any box of the given kinds (separating axes)."""
         ha = np.asarray(size[:2], float) / 2 + clearance
         ra = _rot2(yaw)
-        for b in self.boxes:
+        if self._fp_n != len(self.boxes):
+            new = self.boxes[self._fp_n:]
+            self._fp_xy = np.concatenate([self._fp_xy, np.array([b.center[:2] for b in new], float).reshape(-1, 2)])
+            self._fp_r = np.concatenate([self._fp_r, [np.hypot(b.size[0], b.size[1]) / 2 for b in new]])
+            self._fp_n = len(self.boxes)
+        # Footprints whose bounding circles lie apart (1 um slack) cannot overlap: only the others get the
+        # exact separating-axis test (the same decisions, a fraction of the work in crowded rooms).
+        near = np.hypot(*(self._fp_xy - np.asarray(xy, float)).T) <= self._fp_r + float(np.hypot(*ha)) + 1e-6
+        for k in np.flatnonzero(near):
+            b = self.boxes[k]
             if kinds is not None and b.kind not in kinds:
                 continue
             hb = np.asarray(b.size[:2]) / 2
@@ -167,6 +186,34 @@ class _Builder:
             if not self.overlaps(xy, size, yaw, clearance):
                 return xy
         return None
+
+    def partitions(self) -> bool:
+        """Full-height walls across the room, parallel to its shorter side, each with one doorway
+        (``doorway_width``, anywhere along it, also at an end); compartments at least 1.6 m deep."""
+        n = self.cfg.n_partitions
+        if n == 0:
+            return True
+        axis = 0 if self.L[0] >= self.L[1] else 1       # the walls stand at x = const when the room is long in x
+        length, span = self.L[1 - axis], self.L[axis]
+        thick = 0.12
+        min_depth = 1.6
+        if span < (n + 1) * min_depth + n * thick:
+            return False
+        # positions along the long axis: every compartment min_depth deep plus a random share of the spare depth
+        slack = span - (n + 1) * min_depth - n * thick
+        cuts = np.sort(self.rng.uniform(0.0, slack, n))
+        pos = [min_depth * (k + 1) + thick * k + thick / 2 + cuts[k] for k in range(n)]
+        for p in pos:
+            door = _uniform(self.rng, self.cfg.doorway_width)
+            d0 = float(self.rng.uniform(0.0, length - door))
+            for a, b in ((0.0, d0), (d0 + door, length)):
+                if b - a < 0.05:
+                    continue                             # the doorway reaches this end wall
+                mid = (a + b) / 2
+                xy = (p, mid) if axis == 0 else (mid, p)
+                size = (thick, b - a, self.L[2]) if axis == 0 else (b - a, thick, self.L[2])
+                self.box(xy, 0.0, size, 0.0, "brickwork", "wall")
+        return True
 
     def pillars(self) -> bool:
         for _ in range(self.cfg.n_pillars):
@@ -310,8 +357,13 @@ def free_space_grid(world: World, inflate: float = ROBOT_RADIUS, res: float = 0.
     X, Y = np.meshgrid(xs, ys, indexing="ij")
     occ = np.zeros(X.shape, bool)
     for b in blocking_obstacles(world):
-        pts = np.stack([X, Y, np.full_like(X, b.center[2])], axis=-1)
-        occ |= b.contains(pts)
+        # only the cells around the box's plan-view bounding box (2 cells of slack) can be inside it
+        c = b.corners()
+        i0, j0 = (np.floor(c[:, :2].min(0) / res).astype(int) - 2).clip(0)
+        i1, j1 = np.ceil(c[:, :2].max(0) / res).astype(int) + 3
+        sx, sy = X[i0:i1, j0:j1], Y[i0:i1, j0:j1]
+        pts = np.stack([sx, sy, np.full_like(sx, b.center[2])], axis=-1)
+        occ[i0:i1, j0:j1] |= b.contains(pts)
     free = ndimage.distance_transform_edt(~occ) * res > inflate
     free &= (X > inflate) & (X < Lx - inflate) & (Y > inflate) & (Y < Ly - inflate)
     return free, np.stack([X, Y], axis=-1)
@@ -358,7 +410,7 @@ def generate_world(cfg: RubbleConfig = RubbleConfig(), seed: int = 0, name: str 
     room = cfg.room
     for _ in range(cfg.max_attempts):
         b = _Builder(cfg, rng)
-        if not (b.pillars() and b.walls() and b.voids()):
+        if not (b.partitions() and b.pillars() and b.walls() and b.voids()):
             continue
         b.slabs_and_blocks()
         b.debris()
