@@ -118,8 +118,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="Dask scheduler address (needs the 'cluster' extra); default: local processes")
     s.add_argument("--workers", type=int, default=None, help="local worker processes (default: CPU count)")
     s.add_argument("--time-limit", type=float, default=None, help="override every scenario's time limit (s)")
-    s.add_argument("--out", default="out/sweep", help="directory for runs.csv, families.csv, scenarios.csv, victims.csv, "
-                   "summary.md, summary.json and sweep.png")
+    s.add_argument("--out", default="out/sweep", help="directory for runs.csv, families.csv, scenarios.csv, "
+                   "victims.csv, summary.md, summary.json and sweep.png")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=_sweep)
 

@@ -108,8 +108,8 @@ class FreeSpaceGraph:
             cols.append(index[a + di, b + dj])
             w.append(np.full(a.size, self.res * math.hypot(di, dj)))
         n = len(self.cells)
-        self.graph = coo_matrix((np.concatenate(w), (np.concatenate(rows), np.concatenate(cols))),
-                                shape=(n, n)).tocsr()
+        self._edges = (np.concatenate(rows), np.concatenate(cols), np.concatenate(w))
+        self.graph = coo_matrix((self._edges[2], (self._edges[0], self._edges[1])), shape=(n, n)).tocsr()
         self._fields: dict[tuple[float, float, float], np.ndarray] = {}
 
     # -- distances ---------------------------------------------------------------------
@@ -119,24 +119,33 @@ class FreeSpaceGraph:
         return np.flatnonzero(np.hypot(*(self.cells - g).T) <= radius)
 
     def field(self, goal_xy, radius: float = FIND_BASE_RADIUS_M) -> np.ndarray:
-        """Graph distance (m) of every node to the goal region (inf: cut off from it).
+        """Shortest path (m) from every node's centre to within ``radius`` of ``goal_xy`` (inf: cut off).
 
-        A goal region holding no node (a victim deep in rubble): distances to the node nearest her plus the rest
-        of the way in a straight line, so the metric stays defined."""
+        A path on the graph ends at a cell centre inside the goal disc, up to a knight move past its edge; it is
+        credited the part inside (radius - the centre's distance from the goal): a virtual source joined to
+        every goal cell by ``2.5 res - that slack`` (>= 0 for the cells a path enters by), the 2.5 res taken
+        off again. Nodes inside the disc read <= 0. A goal region holding no node (a victim deep in rubble):
+        the path to the node nearest her plus the rest of the way in a straight line."""
         g = np.asarray(goal_xy, float)[:2]
         key = (round(float(g[0]), 9), round(float(g[1]), 9), float(radius))
         f = self._fields.get(key)
         if f is None:
-            if not len(self.cells):
+            n = len(self.cells)
+            if not n:
                 f = np.zeros(0)
             else:
                 goal = self.region(g, radius)
-                extra = 0.0
-                if not goal.size:
+                if goal.size:
+                    k = 2.5 * self.res
+                    w = np.maximum(k - (radius - np.hypot(*(self.cells[goal] - g).T)), 1e-9)
+                else:
                     d = np.hypot(*(self.cells - g).T)
-                    k = int(np.argmin(d))
-                    goal, extra = np.array([k]), max(0.0, float(d[k]) - radius)
-                f = dijkstra(self.graph, directed=False, indices=goal, min_only=True) + extra
+                    goal = np.array([int(np.argmin(d))])
+                    k, w = 0.0, np.array([max(0.0, float(d[goal[0]]) - radius)]) + 1e-9
+                r, c, ww = self._edges
+                aug = coo_matrix((np.concatenate([ww, w]), (np.concatenate([r, np.full(goal.size, n)]),
+                                                             np.concatenate([c, goal]))), shape=(n + 1, n + 1))
+                f = dijkstra(aug.tocsr(), directed=False, indices=n)[:n] - k - 1e-9
             self._fields[key] = f
         return f
 
@@ -150,14 +159,19 @@ class FreeSpaceGraph:
 
     def shortest_path(self, start_xy, goal_xy, radius: float = FIND_BASE_RADIUS_M) -> float:
         """Shortest path (m) of the robot centre from ``start_xy`` to within ``radius`` of ``goal_xy``: 0 if already
-        there, else straight to the nearest free cell centre and on along the graph; inf if cut off."""
+        there, else straight to the best free cell centre within 0.75 cells of it (its own cell, or the four
+        around a corner it sits on; off the free floor: the nearest free cell) and on along the graph; inf if
+        cut off."""
         s, g = np.asarray(start_xy, float)[:2], np.asarray(goal_xy, float)[:2]
         if math.hypot(*(s - g)) <= radius:
             return 0.0
-        k, d0 = self.nearest_node(s)
-        if k < 0:
+        if not len(self.cells):
             return math.inf
-        return float(self.field(g, radius)[k]) + d0
+        d = np.hypot(*(self.cells - s).T)
+        near = np.flatnonzero(d <= 0.75 * self.res)
+        if not near.size:
+            near = np.array([int(np.argmin(d))])
+        return max(0.0, float(np.min(d[near] + self.field(g, radius)[near])))
 
     def reachable_area(self, start_xy, goal_xy, radius: float = FIND_BASE_RADIUS_M) -> float:
         """Floor (m^2) where the robot centre can stand within ``radius`` of ``goal_xy``, reachable from

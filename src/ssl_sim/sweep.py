@@ -285,7 +285,8 @@ def write_tables(rows: Sequence[dict], tables: dict[str, list[dict]], out_dir: s
           "victims; \"reached\" = base within 0.75 m at a declaration. Intervals: 95 % bootstrap over scenarios; "
           "angular errors pool every detection against the nearest sounding source (array frame).", "",
           f"Commit {prov['commit'] or '?'}{' (uncommitted changes)' if prov['dirty'] else ''}; "
-          + ", ".join(f"{k} {v}" for k, v in pk.items()) + f"; OpenBLAS kernel {prov['openblas_coretype'] or 'CPU default'}"
+          + ", ".join(f"{k} {v}" for k, v in pk.items())
+          + f"; OpenBLAS kernel {prov['openblas_coretype'] or 'CPU default'}"
           f" ({'; '.join(prov['machine']['blas'])}); CPU {prov['machine']['cpu']} x {prov['machine']['cores']}.", "",
           "## Scene families", "", interval_table(tables.get("families", [])),
           "## Scenarios", "", markdown_table(tables["scenarios"]), "## Victims", "", markdown_table(tables["victims"])]

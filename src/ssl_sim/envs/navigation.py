@@ -43,7 +43,7 @@ class GeodesicMap:
         """Distance (m) of every grid cell to the goal region of a victim at ``goal_xy`` (inf if cut off)."""
         out = np.full(self.free.shape, np.inf)
         if self.graph.region(goal_xy, self.goal_radius).size:
-            out[self.free] = self.graph.field(goal_xy, self.goal_radius)
+            out[self.free] = np.maximum(self.graph.field(goal_xy, self.goal_radius), 0.0)
         return out
 
     def _cell(self, xy) -> tuple[int, int, float]:
