@@ -209,19 +209,23 @@ def test_bad_files_name_the_field(tmp_path, text, field):
 
 
 def test_unreachable_victim_is_rejected(tmp_path):
-    # Enclose a victim in four walls: in air, but the robot cannot get there.
+    # Enclose a victim in four walls 1.6 m from her: in air, but the robot cannot come within the 1.5 m a find
+    # is confirmed from (outside, its centre stays 1.6 + 0.05 + 0.16 m away).
     walls = "".join(f"""
 [[obstacles]]
 center = {c}
 size = {s}
 kind = "wall"
-""" for c, s in (([2.0, 1.4, 0.5], [1.4, 0.1, 1.0]), ([2.0, 2.6, 0.5], [1.4, 0.1, 1.0]),
-                   ([1.4, 2.0, 0.5], [0.1, 1.4, 1.0]), ([2.6, 2.0, 0.5], [0.1, 1.4, 1.0])))
-    _write(tmp_path, f'name = "boxed"\nrobot_start = [4.0, 2.0, 0.0]\n[room]\nsize = [5.0, 4.0, 2.5]\n{walls}',
+""" for c, s in (([3.0, 1.9, 0.5], [3.3, 0.1, 1.0]), ([3.0, 5.1, 0.5], [3.3, 0.1, 1.0]),
+                   ([1.4, 3.5, 0.5], [0.1, 3.3, 1.0]), ([4.6, 3.5, 0.5], [0.1, 3.3, 1.0])))
+    _write(tmp_path, f'name = "boxed"\nrobot_start = [6.5, 3.5, 0.0]\n[room]\nsize = [8.0, 7.0, 2.5]\n{walls}',
            "boxed_scene.toml")
-    text = '[scene]\nfile = "boxed_scene.toml"\n[[victims]]\nposition = [2.0, 2.0, 0.1]\n'
+    text = '[scene]\nfile = "boxed_scene.toml"\n[[victims]]\nposition = [3.0, 3.5, 0.1]\n'
     with pytest.raises(ScenarioError, match=r"victims\[0\].position: .* cannot be reached"):
         load_scenario(_write(tmp_path, text))
+    # 1.2 m from her the walls leave floor within 1.5 m outside them: that victim can be confirmed, and loads
+    near = text.replace("[3.0, 3.5, 0.1]", "[3.0, 2.3, 0.1]")
+    assert load_scenario(_write(tmp_path, near, "near.toml")).victims[0].position[1] == 2.3
 
 
 def test_voice_file_and_generated_scene(tmp_path):
