@@ -22,6 +22,11 @@ What is measured (all from the simulator's truth, never from the robot's own est
   sources in the ARRAY frame at the listening pose (each detection is matched to the nearest
   source that was sounding during the block; errors in degrees).
 * **wall clock**: seconds spent in physics, acoustics, localization and the rest.
+
+results.json also lists every declaration (``declarations``: reported position, base position, its kind:
+find, false_find, too_far or late), the false finds alone (``false_finds``), ``n_reached``, the scoring
+constants (``scoring``) and where the result came from (``provenance``: commit, package versions, BLAS kernel,
+CPU).
 """
 from __future__ import annotations
 
