@@ -3,14 +3,15 @@
 For each code version (this tree's ``src`` and the ``--baseline`` git ref's ``src``, extracted with
 ``git archive`` into a temporary directory) a worker process runs every scenario x seed as ``ssl-rescue sweep``
 does (``ssl_sim.runner.RescueRun``, one process per run, deterministic per seed) and returns one row per run.
-Scenario files are always this tree's (the old code runs the same scenarios; sections it does not know are
-removed from a temporary copy). Prints, per scenario and version: victims found, runs with all found, mean
-SPL, false "found" per run, runs ending "stuck", position error of found victims (median / p90 over victims),
-mean simulated time; then one JSON line.
-
-Targets: paper_lab 8/8; light_rubble_three >= 23/24 victims with a 180 s limit, mean SPL >= 0.6;
-dense_pump >= 12/16; the machine-louder scenario >= 4/5 seeds; false found <= 0.1 per run; no "stuck" while
-back-offs succeed; position error median <= 0.3 m, p90 <= 0.5 m.
+Every version is ended and scored by *this* tree's ``ssl_sim/scoring.py`` (loaded by path in the old version's
+process too): a find is a report within 0.5 m of an unfound victim with the base within 1.5 m of her, SPL on
+the one free-space graph (``docs/design/scoring.md``). Scenario files are always this tree's (the old code runs
+the same scenarios; sections it does not know are removed from a temporary copy), or with ``--suite SPLIT`` a
+generated suite's (``ssl_sim.suite.write_scenarios``). Prints, per version: every metric per scene family
+with its 95 % bootstrap interval over scenarios (``ssl_sim.stats``); per scenario victims found and reached,
+runs with all found, mean SPL, false finds per run, runs ending "stuck", position error of found victims;
+the paired difference this tree - baseline over the same scenarios ("outside chance" only when its interval
+excludes 0); the share of runs whose outcome differs between two BLAS kernels; then one JSON line.
 
 **Reproducible across x86 machines**: OpenBLAS picks its kernels by CPU (SkylakeX on AVX-512 Intel parts, Haswell
 on AMD Zen), and their last-bit rounding differences grow, through thresholds in the closed loop, into other
@@ -22,6 +23,7 @@ floor of a seed set.
 
 Run (background it, it takes long on a shared machine):
 ``nice .venv/bin/python benchmarks/bench_rescue.py --seeds 0:8 [--baseline main] [--workers 2] [--blas K1,K2]``
+``nice .venv/bin/python benchmarks/bench_rescue.py --suite test --seeds 0 --results-name rescue_suite_test``
 """
 from __future__ import annotations
 
@@ -54,21 +56,68 @@ NEW_SECTIONS = ("motion", "sound_map", "planner", "occupancy")
 
 
 # ----------------------------------------------------------------------------- worker side
+def _scoring():
+    """This tree's ``ssl_sim/scoring.py``, loaded by path: every code version is scored by the same definition
+    (an older tree's runner scores by its own rules, which are not the ones compared here)."""
+    import importlib.util
+    spec = importlib.util.spec_from_file_location("_bench_scoring", ROOT / "src" / "ssl_sim" / "scoring.py")
+    mod = importlib.util.module_from_spec(spec)
+    sys.modules[spec.name] = mod      # dataclasses look their module up
+    spec.loader.exec_module(mod)
+    return mod
+
+
 def _one(path: str, seed: int, time_limit: float | None) -> dict:
+    """One run of whatever code version is on the path, driven as ``RescueRun.run`` does, but ended and scored by
+    this tree's scoring (the run ends when every victim is *found* by its rules, the behaviour finishes or time is
+    up)."""
+    from robot.rescue import Decision
     from ssl_sim.runner import RescueRun
     from ssl_sim.scenario import load_scenario
+    scoring = _scoring()
     t0 = time.process_time()
-    sc = load_scenario(path).with_overrides(seed=seed, time_limit_s=time_limit)
-    r = RescueRun(sc).run()
-    ev = r["events"]
-    blas = os.environ.get("OPENBLAS_CORETYPE", "")
+    sc = load_scenario(path).with_overrides(seed=None if seed < 0 else seed, time_limit_s=time_limit)
+    run = RescueRun(sc)
+    n = run.n_victims
+    victims_xy = [s.position[:2] for s in run.sources[:n]]
+    judge = scoring.Judge(victims_xy, sc.time_limit_s)
+    finds = []
+    end_reason = "time_up"
+    try:
+        while True:
+            if len(judge.found) == n:
+                end_reason = "all_found"
+                break
+            if run.behaviour.done:
+                last = run.behaviour.events[-1].decision if run.behaviour.events else "done"
+                end_reason = f"behaviour_{getattr(last, 'value', last)}"
+                break
+            if run.clock.now() >= sc.time_limit_s:
+                break
+            events = run.behaviour.step()
+            run._handle_events(events)
+            for ev in events:
+                if ev.decision is Decision.VICTIM_FOUND:
+                    _, x, y, _, _ = run._pose_at(ev.time)
+                    j = judge.declare(ev.time, ev.data.get("position", (float("nan"),) * 2), (x, y))
+                    if j.kind == "find":
+                        finds.append((j.victim, (x, y), run._path_at(ev.time)))
+    finally:
+        run.drive.stop()
+    graph = scoring.FreeSpaceGraph(run.world)
+    legs = scoring.leg_spls(graph, victims_xy, run.world.robot_start[:2], finds)
+    ev = [str(e) for e in run.events]
     last_backoff_ok = not any("backing off blocked" in e for e in ev[-3:])
-    return {"scenario": r["scenario"], "seed": seed, "blas": blas, "n_found": r["n_found"], "n_victims": r["n_victims"],
-            "success": r["success"], "spl": r["spl"], "false_positives": len(r["false_positives"]),
-            "end_reason": r["end_reason"], "stuck_with_free_backoff": r["end_reason"].endswith("stuck")
-            and last_backoff_ok, "sim_time_s": r["sim_time_s"], "cpu_s": round(time.process_time() - t0, 2),
-            "position_errors_m": [v["estimate_error_m"] for v in r["victims"]
-                                  if v["found"] and v.get("estimate_error_m") is not None]}
+    found = sorted(judge.found)
+    return {"scenario": sc.name, "seed": sc.seed, "blas": os.environ.get("OPENBLAS_CORETYPE", ""),
+            "n_found": len(found), "n_victims": n, "n_reached": len(judge.reached), "success": len(found) == n,
+            "spl": scoring.run_spl(n, legs), "false_finds": len(judge.false_finds),
+            "too_far": sum(j.kind == "too_far" for j in judge.judgements), "end_reason": end_reason,
+            "stuck_with_free_backoff": end_reason.endswith("stuck") and last_backoff_ok,
+            "sim_time_s": round(run.robot.time, 2), "cpu_s": round(time.process_time() - t0, 2),
+            "found_victims": [run.sources[k].name for k in found],
+            "find_times_s": [round(judge.found[k].time_s, 2) for k in found],
+            "position_errors_m": [round(judge.found[k].report_error_m, 4) for k in found]}
 
 
 def worker(paths: list[str], seeds: list[int], workers: int, out: str) -> None:
@@ -80,16 +129,21 @@ def worker(paths: list[str], seeds: list[int], workers: int, out: str) -> None:
 
 
 # ----------------------------------------------------------------------------- driver side
-def _scenario_paths(tmp: Path, old: bool, only: list[str] | None = None) -> list[str]:
-    names = SCENARIOS + [n for n in OPTIONAL if (ROOT / "src" / "ssl_sim" / "scenarios" / f"{n}.toml").exists()]
-    if only:
-        unknown = sorted(set(only) - set(names))
-        if unknown:
-            raise SystemExit(f"bench_rescue.py: --scenarios: unknown {unknown}, expected some of {names}")
-        names = [n for n in names if n in only]
+def _scenario_paths(tmp: Path, old: bool, only: list[str] | None = None, files: list[Path] | None = None) -> list[str]:
+    """Scenario files for one version: the shipped ones (``only``: some of them) or ``files`` (a suite's)."""
+    if files is not None:
+        sources = list(files)
+    else:
+        names = SCENARIOS + [n for n in OPTIONAL if (ROOT / "src" / "ssl_sim" / "scenarios" / f"{n}.toml").exists()]
+        if only:
+            unknown = sorted(set(only) - set(names))
+            if unknown:
+                raise SystemExit(f"bench_rescue.py: --scenarios: unknown {unknown}, expected some of {names}")
+            names = [n for n in names if n in only]
+        sources = [ROOT / "src" / "ssl_sim" / "scenarios" / f"{n}.toml" for n in names]
     out = []
-    for n in names:
-        src = ROOT / "src" / "ssl_sim" / "scenarios" / f"{n}.toml"
+    for src in sources:
+        n = src.stem
         if not old:
             out.append(str(src))
             continue
@@ -138,11 +192,13 @@ def _table(rows: list[dict]) -> list[dict]:
         spl_by_kernel = [float(np.mean([r["spl"] for r in rs if r.get("blas", "") == k])) for k in kernels]
         out.append({"scenario": name, "runs": len(rs), "blas": "+".join(k or "cpu" for k in kernels),
                     "victims_found": f"{sum(r['n_found'] for r in rs)}/{sum(r['n_victims'] for r in rs)}",
+                    "victims_reached": f"{sum(r['n_reached'] for r in rs)}/{sum(r['n_victims'] for r in rs)}",
                     "all_found_runs": sum(r["success"] for r in rs),
                     "mean_spl": round(float(np.mean([r["spl"] for r in rs])), 3),
                     "spl_range_over_blas": (f"{min(spl_by_kernel):.3f}-{max(spl_by_kernel):.3f}"
                                             if len(kernels) > 1 else "-"),
-                    "false_found_per_run": round(float(np.mean([r["false_positives"] for r in rs])), 3),
+                    "false_finds_per_run": round(float(np.mean([r["false_finds"] for r in rs])), 3),
+                    "too_far_per_run": round(float(np.mean([r["too_far"] for r in rs])), 3),
                     "stuck_runs": sum(r["end_reason"].endswith("stuck") for r in rs),
                     "stuck_with_free_backoff": sum(r["stuck_with_free_backoff"] for r in rs),
                     "pos_err_median_m": round(float(np.median(errs)), 3) if errs.size else None,
@@ -152,7 +208,31 @@ def _table(rows: list[dict]) -> list[dict]:
     return out
 
 
+def _interval_rows(summary: list[dict]) -> list[dict]:
+    """``ssl_sim.stats.summarize`` rows as "mean [lo, hi]" cells."""
+    from ssl_sim import stats
+    out = []
+    for r in summary:
+        row = {"family": r["family"], "scenarios": r["scenarios"]}
+        for m, (label, unit) in stats.METRICS.items():
+            iv = stats.Interval(*(float("nan") if r[k] is None else r[k] for k in (m, f"{m}_lo", f"{m}_hi")),
+                                n=r["scenarios"])
+            row[label + (f" ({unit})" if unit else "")] = iv.fmt(1 if unit == "s" else 2 if unit == "m" else 3)
+        out.append(row)
+    return out
+
+
+def _paired_rows(comparison: list[dict]) -> list[dict]:
+    def f(x):
+        return "-" if x is None or x != x else f"{x:.3f}"
+    return [{"metric": c["metric"], "pairs": c["pairs"], "this tree": f(c["new"]), "baseline": f(c["old"]),
+             "difference [95 %]": f"{f(c['difference'])} [{f(c['difference_lo'])}, {f(c['difference_hi'])}]",
+             "outside chance": "yes" if c["outside_chance"] else "no"} for c in comparison]
+
+
 def _markdown(rows: list[dict]) -> str:
+    if not rows:
+        return "(no rows)"
     cols = list(rows[0])
     lines = ["| " + " | ".join(cols) + " |", "|" + "|".join("---" for _ in cols) + "|"]
     lines += ["| " + " | ".join("-" if r[c] is None else str(r[c]) for c in cols) + " |" for r in rows]
@@ -161,12 +241,17 @@ def _markdown(rows: list[dict]) -> str:
 
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
-    ap.add_argument("--seeds", default="0:8", help="START:STOP (stop exclusive) or a comma list")
+    ap.add_argument("--seeds", default="0:8", help="START:STOP (stop exclusive) or a comma list (with --suite: "
+                    "default each scenario's own seed)")
     ap.add_argument("--baseline", default="main", help="git ref of the old behaviour ('' = skip it)")
     ap.add_argument("--baseline-src", default=None,
                     help="or the src directory of a checkout of the old behaviour (with its models/, data/ beside)")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--scenarios", default=None, help="comma list of scenario names (default: all shipped ones)")
+    ap.add_argument("--suite", default=None, help="run a generated suite's split (train | test) instead of the "
+                    "shipped scenarios (ssl_sim.suite.write_scenarios)")
+    ap.add_argument("--count", type=int, default=None, help="with --suite: only its first COUNT scenarios")
+    ap.add_argument("--results-name", default="rescue", help="write benchmarks/results/NAME.json (_results.py); '' for none")
     ap.add_argument("--rows-out", default=None, help="also write every run's row (JSON) here")
     ap.add_argument("--rows-in", nargs="*", default=(), help="rows files of earlier runs to add to the tables")
     ap.add_argument("--blas", default=None,
@@ -183,11 +268,28 @@ def main(argv: list[str] | None = None) -> int:
     # An OPENBLAS_CORETYPE the caller set is kept, not replaced by the default.
     kernels = check_kernels(args.blas.split(",") if args.blas is not None
                             else [os.environ.get("OPENBLAS_CORETYPE") or default_kernel()])
+    sys.path.append(str(ROOT / "src"))   # the driver reads this tree's ssl_sim (stats, suite); workers get PYTHONPATH
     t0 = time.perf_counter()
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
         only = args.scenarios.split(",") if args.scenarios else None
-        new_paths = _scenario_paths(tmp, old=False, only=only)
+        suite_files, families = None, {}
+        if args.suite:
+            if args.scenarios:
+                raise SystemExit("bench_rescue.py: --suite and --scenarios exclude each other")
+            try:
+                from ssl_sim.suite import write_scenarios
+            except ImportError as exc:
+                raise SystemExit(f"bench_rescue.py: --suite needs ssl_sim.suite.write_scenarios, which this tree does "
+                                 f"not provide ({exc})") from None
+            suite_files = [Path(p) for p in write_scenarios(args.suite, tmp / "suite", args.count)]
+            if "--seeds" not in (argv if argv is not None else sys.argv[1:]):
+                seeds = [-1]    # a suite scenario is complete with its seed
+            from ssl_sim.scenario import load_scenario
+            for p in suite_files:   # the family each scenario is summarized under
+                sc = load_scenario(p)
+                families[sc.name] = getattr(sc, "family", None) or sc.name
+        new_paths = _scenario_paths(tmp, old=False, only=only, files=suite_files)
         old_paths: list[str] = []
         base_src = None
         if args.baseline or args.baseline_src:
@@ -201,7 +303,7 @@ def main(argv: list[str] | None = None) -> int:
                                       capture_output=True).stdout
                 subprocess.run(["tar", "-x", "-C", str(base)], input=arch, check=True)
                 base_src = base / "src"
-            old_paths = _scenario_paths(tmp, old=True, only=only)
+            old_paths = _scenario_paths(tmp, old=True, only=only, files=suite_files)
         rows: dict[str, list[dict]] = {"new": []}
         try:
             for blas in kernels:
@@ -221,24 +323,43 @@ def main(argv: list[str] | None = None) -> int:
         if args.rows_out:
             Path(args.rows_out).write_text(json.dumps(rows))
         seeds = sorted({r["seed"] for r in rows["new"]})
-        new, old = _table(rows["new"]), (_table(rows["old"]) if "old" in rows else None)
-    print(f"seeds {seeds}; light_rubble_three limited to {TIME_LIMITS['light_rubble_three']:g} s; OpenBLAS kernels "
-          f"{', '.join(k or 'the CPU default' for k in kernels)}\n")
-    print("this tree:\n" + _markdown(new) + "\n")
+    from ssl_sim import stats
+    for rs in rows.values():
+        for r in rs:
+            r["family"] = families.get(r["scenario"], r["scenario"])
+    new, old = _table(rows["new"]), (_table(rows["old"]) if "old" in rows else None)
+    summary = {tag: stats.summarize(rs) for tag, rs in rows.items()}
+    paired = stats.paired_comparison(rows["new"], rows["old"]) if "old" in rows else None
+    divergence = {tag: stats.kernel_divergence(rs) for tag, rs in rows.items()}
+    what = f"suite {args.suite!r} ({len(suite_files)} scenarios)" if args.suite else \
+        f"light_rubble_three limited to {TIME_LIMITS['light_rubble_three']:g} s"
+    print(f"seeds {seeds}; {what}; OpenBLAS kernels {', '.join(k or 'the CPU default' for k in kernels)}; scored by "
+          "this tree's ssl_sim.scoring (find: report within 0.5 m, base within 1.5 m; SPL to within 1.5 m)\n")
+    tables = {"this tree, 95 % intervals over scenarios": _markdown(_interval_rows(summary["new"])),
+              "this tree, per scenario": _markdown(new)}
     if old:
-        print(f"baseline ({args.baseline_src or args.baseline}):\n" + _markdown(old) + "\n")
-    print(json.dumps({"bench": "rescue", "seeds": seeds, "blas": kernels, "new": new, "old": old,
+        base = args.baseline_src or args.baseline
+        tables[f"baseline {base}, 95 % intervals over scenarios"] = _markdown(_interval_rows(summary["old"]))
+        tables[f"baseline {base}, per scenario"] = _markdown(old)
+        tables[f"this tree - baseline {base}, paired over the same scenarios"] = _markdown(_paired_rows(paired))
+    for tag, div in divergence.items():
+        if div:
+            tables[f"{'this tree' if tag == 'new' else 'baseline'}: BLAS kernel divergence"] = _markdown(div)
+    for title, text in tables.items():
+        print(f"{title}:\n{text}\n")
+    if args.results_name:
+        from _results import write_result
+        overall = next(r for r in summary["new"] if r["family"] == "all") if len(summary["new"]) > 1 \
+            else summary["new"][0]
+        figures = {f"{k}": overall[k] for k in overall if k not in ("family",) and overall[k] is not None}
+        for c in paired or []:
+            figures[f"paired_{c['metric']}_difference"] = c["difference"]
+            figures[f"paired_{c['metric']}_difference_lo"] = c["difference_lo"]
+            figures[f"paired_{c['metric']}_difference_hi"] = c["difference_hi"]
+        write_result(args.results_name, {k: v for k, v in figures.items() if v is not None}, tables)
+    print(json.dumps({"bench": "rescue", "seeds": seeds, "suite": args.suite, "blas": kernels, "new": new, "old": old,
+                      "summary": summary, "paired": paired, "divergence": divergence,
                       "wall_s": round(time.perf_counter() - t0, 1)}))
-    figures = {}
-    for row in new:
-        found, victims = (int(v) for v in row["victims_found"].split("/"))
-        figures.update({f"victims_found | {row['scenario']}": found, f"victims | {row['scenario']}": victims})
-        figures.update({f"{k} | {row['scenario']}": v for k, v in row.items()
-                        if isinstance(v, (int, float)) and not isinstance(v, bool)})
-    seed_txt = f"{seeds[0]}-{seeds[-1]}" if seeds == list(range(seeds[0], seeds[-1] + 1)) else ",".join(map(str, seeds))
-    write_result("rescue", figures, {
-        f"Rescue scenarios, seeds {seed_txt}, OpenBLAS kernels {', '.join(k or 'CPU default' for k in kernels)} "
-        f"(light_rubble_three limited to {TIME_LIMITS['light_rubble_three']:g} s)": _markdown(new) + "\n"})
     return 0
 
 

@@ -49,11 +49,11 @@ def fidelity(sc, n_poses: int = 16) -> dict:
     from ssl_sim.acoustics import AcousticSimulator, ArrayMount, RobotPose, SoundSource
     from ssl_sim.acoustics.voices import continuous_voice
     from ssl_sim.physics.robot_model import RobotModelConfig
-    from ssl_sim.runner import FreeSpacePaths
+    from ssl_sim.scoring import FreeSpaceGraph
 
     world = sc.world()
     sources = sc.sources(world, fs=sc.localizer.fs)
-    cells = FreeSpacePaths(world)._cells
+    cells = FreeSpaceGraph(world).cells
     mount = ArrayMount(height_m=RobotModelConfig().array_height)
     loc = Localizer(cube8(), replace(sc.localizer, n_sources=1))
     configs = {"scenario": sc.acoustic_config(), "exact": replace(sc.acoustic_config(), obstacle_order=None)}

@@ -15,8 +15,9 @@ from scipy.io import wavfile
 
 from ssl_sim.acoustics.signals import LoopedSignal
 from ssl_sim.cli import main as cli_main
-from ssl_sim.runner import FreeSpacePaths, RescueRun, run_scenario
+from ssl_sim.runner import RescueRun, run_scenario
 from ssl_sim.scenario import ScenarioError, load_scenario, parse_scenario, scenario_names
+from ssl_sim.scoring import FreeSpaceGraph
 from ssl_sim.world import Box, Room, World
 
 
@@ -49,12 +50,15 @@ def test_default_scenario_finds_its_victim(paper_lab_result):
     v = r["victims"][0]
     assert v["found"] and v["time_s"] <= r["time_limit_s"]
     # Truth: the robot really is next to the caller, and its own estimate of where she lies is close.
-    assert v["robot_distance_m"] <= r["success_radius_m"]
+    assert v["robot_distance_m"] <= 0.75 and v["reached"] and r["n_reached"] == 1
     assert v["estimate_error_m"] < 0.3
-    # It drove roughly straight at her: at least the geodesic, not much more than the 1.5 m between them.
-    assert v["leg_shortest_path_m"] <= v["leg_path_m"] < 2.0
-    assert 0.4 < v["spl"] <= 1.0
-    assert r["collisions"] == 0 and not r["false_positives"]
+    # It drove roughly straight at her, less than the 1.5 m between them. She is 1.4997 m from the start, inside
+    # the 1.5 m a find may be confirmed from: the shortest path is 0, so any driving scores SPL 0.
+    start = np.array([3.0, 3.0])
+    assert np.hypot(*(np.array(v["position"][:2]) - start)) < 1.5
+    assert 0.5 < v["leg_path_m"] < 2.0 and v["leg_shortest_path_m"] == 0.0 and v["spl"] == 0.0
+    assert r["collisions"] == 0 and not r["false_finds"]
+    assert [d["kind"] for d in r["declarations"]] == ["find"]
     # Every listen's detections were scored against the true direction; the lab is easy.
     assert r["n_listens"] >= 2
     assert r["angular_error_deg"]["strongest_detection"]["median"] < 5.0
@@ -65,7 +69,7 @@ def test_default_scenario_finds_its_victim(paper_lab_result):
 
 def test_runs_are_deterministic_for_a_seed(paper_lab_result):
     again = run_scenario("paper_lab", seed=0)
-    strip = ("wall_clock_s",)
+    strip = ("wall_clock_s", "provenance")
     a = {k: v for k, v in paper_lab_result.items() if k not in strip}
     b = {k: v for k, v in again.items() if k not in strip}
     assert json.dumps(a, sort_keys=True, default=str) == json.dumps(b, sort_keys=True, default=str)
@@ -93,9 +97,9 @@ def test_three_callers_in_light_rubble_found_over_four_seeds():
         r = run_scenario("light_rubble_three", seed=seed)
         hits = [v for v in r["victims"] if v["found"]]
         found += len(hits)
-        false += len(r["false_positives"])
+        false += len(r["false_finds"])
         assert all(v["time_s"] <= r["time_limit_s"] for v in hits)
-        assert all(v["robot_distance_m"] <= r["success_radius_m"] for v in hits)
+        assert all(v["robot_distance_m"] <= 1.5 and v["estimate_error_m"] <= 0.5 for v in hits)
         assert all(0 < v["spl"] <= 1 for v in hits)
         assert r["angular_error_deg"]["all_detections"]["median"] < 10.0
         costs = r["wall_clock_s"]
@@ -107,27 +111,28 @@ def test_grid_geodesic_goes_around_a_wall():
     # A 0.4 m thick wall from y=0 to y=3 in a 6 x 4 m room; the robot (16 cm bumper) must pass its end.
     w = World(room=Room(size=(6.0, 4.0, 3.0)), obstacles=(Box((3.0, 1.5, 0.5), (0.4, 3.0, 1.0)),),
               robot_start=(1.0, 1.0, 0.0))
-    p = FreeSpacePaths(w)
+    p = FreeSpaceGraph(w)
     r = 0.16  # inflation = bumper radius
     c1, c2 = np.array([2.8 - r, 3.0 + r]), np.array([3.2 + r, 3.0 + r])
     exact = np.linalg.norm(c1 - [1, 1]) + np.linalg.norm(c2 - c1) + np.linalg.norm([5, 1] - c2) - 0.1
-    d = p.distance((1.0, 1.0), (5.0, 1.0), 0.1)
+    d = p.shortest_path((1.0, 1.0), (5.0, 1.0), 0.1)
     assert exact <= d <= 1.03 * exact
     free_room = World(room=Room(size=(6.0, 4.0, 3.0)), robot_start=(1.0, 1.0, 0.0))
-    assert FreeSpacePaths(free_room).distance((1, 1), (5, 3), 0.5) == pytest.approx(math.hypot(4, 2) - 0.5, rel=0.03)
+    assert FreeSpaceGraph(free_room).shortest_path((1, 1), (5, 3), 0.5) == pytest.approx(math.hypot(4, 2) - 0.5,
+                                                                                         rel=0.03)
 
 
 def test_reachable_floor_near_a_victim_counts_only_floor_the_robot_can_reach():
-    """In the open: the whole success disc. Boxed in by four walls: none. Against one wall (0.4 m thick, its face
+    """In the open: the whole disc. Boxed in by four walls: none. Against one wall (0.4 m thick, its face
     0.2 m from her): the disc minus the wall and the band the 16 cm bumper keeps off it."""
     room = Room(size=(6.0, 4.0, 3.0))
-    open_ = FreeSpacePaths(World(room=room, robot_start=(1.0, 1.0, 0.0)))
+    open_ = FreeSpaceGraph(World(room=room, robot_start=(1.0, 1.0, 0.0)))
     assert open_.reachable_area((1, 1), (4.0, 2.0), 0.75) == pytest.approx(math.pi * 0.75 ** 2, rel=0.03)
     walls = (Box((4.0, 2.6, 0.5), (1.4, 0.2, 1.0)), Box((4.0, 1.4, 0.5), (1.4, 0.2, 1.0)),
              Box((3.4, 2.0, 0.5), (0.2, 1.4, 1.0)), Box((4.6, 2.0, 0.5), (0.2, 1.4, 1.0)))
-    boxed = FreeSpacePaths(World(room=room, obstacles=walls, robot_start=(1.0, 1.0, 0.0)))
+    boxed = FreeSpaceGraph(World(room=room, obstacles=walls, robot_start=(1.0, 1.0, 0.0)))
     assert boxed.reachable_area((1, 1), (4.0, 2.0), 0.75) == 0.0          # free inside the box, but unreachable
-    wall = FreeSpacePaths(World(room=room, obstacles=(Box((4.0, 2.4, 0.5), (2.0, 0.4, 1.0)),),
+    wall = FreeSpaceGraph(World(room=room, obstacles=(Box((4.0, 2.4, 0.5), (2.0, 0.4, 1.0)),),
                                 robot_start=(1.0, 1.0, 0.0)))
     d = 0.2 - 0.16                          # from her to the line the robot centre may come up to
     segment = 0.75 ** 2 * math.acos(d / 0.75) - d * math.sqrt(0.75 ** 2 - d ** 2)   # the disc beyond that line
@@ -139,10 +144,13 @@ def test_cli_run_writes_results(tmp_path, capsys):
     assert cli_main(["run", "paper_lab", "--seed", "1", "--time-limit", "4", "--out", str(out), "--quiet"]) == 0
     data = json.loads((out / "results.json").read_text())
     assert data["scenario"] == "paper_lab" and data["seed"] == 1 and data["time_limit_s"] == 4.0
-    # the lab's caller lies in the open: the whole success disc is floor the robot can stand on
-    assert data["victims"][0]["reachable_floor_m2"] == pytest.approx(math.pi * 0.75 ** 2, rel=0.03)
+    # the lab's caller lies in the open: the whole 1.5 m disc (where a find is confirmed) is floor the robot can use
+    assert data["victims"][0]["reachable_floor_m2"] == pytest.approx(math.pi * 1.5 ** 2, rel=0.03)
+    assert data["scoring"]["find_report_radius_m"] == 0.5 and data["provenance"]["commit"]
+    assert set(data["provenance"]["machine"]["packages"]) >= {"numpy", "scipy", "mujoco", "pyroomacoustics",
+                                                              "onnxruntime"}
     printed = capsys.readouterr().out
-    assert "found 0/1" in printed and "m^2 of reachable floor within the success radius" in printed
+    assert "found 0/1" in printed and "m^2 of reachable floor within 1.5 m" in printed
 
 
 # ---------------------------------------------------------------------------- bad files
@@ -200,19 +208,23 @@ def test_bad_files_name_the_field(tmp_path, text, field):
 
 
 def test_unreachable_victim_is_rejected(tmp_path):
-    # Enclose a victim in four walls: in air, but the robot cannot get there.
+    # Enclose a victim in four walls 1.6 m from her: in air, but the robot cannot come within the 1.5 m a find
+    # is confirmed from (outside, its centre stays 1.6 + 0.05 + 0.16 m away).
     walls = "".join(f"""
 [[obstacles]]
 center = {c}
 size = {s}
 kind = "wall"
-""" for c, s in (([2.0, 1.4, 0.5], [1.4, 0.1, 1.0]), ([2.0, 2.6, 0.5], [1.4, 0.1, 1.0]),
-                   ([1.4, 2.0, 0.5], [0.1, 1.4, 1.0]), ([2.6, 2.0, 0.5], [0.1, 1.4, 1.0])))
-    _write(tmp_path, f'name = "boxed"\nrobot_start = [4.0, 2.0, 0.0]\n[room]\nsize = [5.0, 4.0, 2.5]\n{walls}',
+""" for c, s in (([3.0, 1.9, 0.5], [3.3, 0.1, 1.0]), ([3.0, 5.1, 0.5], [3.3, 0.1, 1.0]),
+                   ([1.4, 3.5, 0.5], [0.1, 3.3, 1.0]), ([4.6, 3.5, 0.5], [0.1, 3.3, 1.0])))
+    _write(tmp_path, f'name = "boxed"\nrobot_start = [6.5, 3.5, 0.0]\n[room]\nsize = [8.0, 7.0, 2.5]\n{walls}',
            "boxed_scene.toml")
-    text = '[scene]\nfile = "boxed_scene.toml"\n[[victims]]\nposition = [2.0, 2.0, 0.1]\n'
+    text = '[scene]\nfile = "boxed_scene.toml"\n[[victims]]\nposition = [3.0, 3.5, 0.1]\n'
     with pytest.raises(ScenarioError, match=r"victims\[0\].position: .* cannot be reached"):
         load_scenario(_write(tmp_path, text))
+    # 1.2 m from her the walls leave floor within 1.5 m outside them: that victim can be confirmed, and loads
+    near = text.replace("[3.0, 3.5, 0.1]", "[3.0, 2.3, 0.1]")
+    assert load_scenario(_write(tmp_path, near, "near.toml")).victims[0].position[1] == 2.3
 
 
 def test_voice_file_and_generated_scene(tmp_path):

@@ -96,7 +96,7 @@ def _summary(label: str, runs: dict[int, dict]) -> dict:
     out = {"label": label, "runs": len(runs), "spl": float(np.mean([r["spl"] for r in runs.values()])),
            "leg_spl": [round(float(np.mean(x)), 3) for x in legs],
            "found": sum(r["n_found"] for r in runs.values()), "victims": sum(r["n_victims"] for r in runs.values()),
-           "false_found": sum(len(r["false_positives"]) for r in runs.values()),
+           "false_found": sum(len(r["false_finds"]) for r in runs.values()),
            "first_find_s": round(float(np.mean([v["time_s"] for v in firsts])), 1),
            "first_leg_m": {k: round(m, 1) for k, m in sorted(metres.items())},
            "first_leg_shortest_m": round(sum(v["leg_shortest_path_m"] for v in firsts), 1)}

@@ -23,6 +23,7 @@ from robot.sound_map import SoundMapConfig
 from ssl_core.localizer import LocalizerConfig
 from ssl_sim import scenario as S
 from ssl_sim.acoustics import AcousticConfig, AmbientNoise
+from ssl_sim.acoustics.ego_noise import EgoNoiseConfig
 
 ROOT = Path(__file__).resolve().parents[1]
 OUT = ROOT / "docs" / "scenario.md"
@@ -31,14 +32,15 @@ OUT = ROOT / "docs" / "scenario.md"
 KEYS = {
     "": {"name": "scenario name (default: the file name)", "description": "one line shown by `ssl-rescue list`",
          "seed": "default run seed (voices, noise, sensor, generated scenes)", "time_limit_s": "simulated seconds",
-         "success_radius_m": "a victim counts as found when the robot declares it within this horizontal distance "
-                             "of the array centre (m, truth)",
+         "success_radius_m": "older files only: accepted when 0.75 (finds are scored by ssl_sim.scoring, "
+                             "docs/design/scoring.md)",
          "scene": "table: where", "robot": "table: the start pose", "victims": "array of tables: who calls",
          "interferers": "array of tables: what else sounds", "noise": "table: diffuse ambient noise",
          "acoustics": "table: the acoustic simulation", "localizer": "table: the localization engine",
          "behaviour": "table: the rescue decisions", "motion": "table: motion primitives",
          "sound_map": "table: the sound map", "planner": "table: the planner", "occupancy": "table: the obstacle grid",
-         "coverage": "table: listening coverage"},
+         "coverage": "table: listening coverage",
+         "ego_noise": "table: the drive's own motor noise (on unless `enabled = false`)"},
     "scene": {"name": "a named scene (`empty_lab`, `light_rubble`, `dense_collapsed_room`)",
               "file": "a scene TOML file, relative to the scenario", "generate": "a generator preset name",
               "seed": "the generator's seed (default: the run seed)",
@@ -61,7 +63,8 @@ PLAIN_KEYS = {"": S._TOP_KEYS, "scene": {"name", "file", "generate", "seed", "us
 STAGES = {"noise": (AmbientNoise, None), "acoustics": (AcousticConfig, S.ACOUSTIC_FIELDS),
           "localizer": (LocalizerConfig, None), "behaviour": (RescueConfig, None), "motion": (MotionConfig, None),
           "sound_map": (SoundMapConfig, None), "planner": (PlannerConfig, None),
-          "occupancy": (OccupancyConfig, None), "coverage": (CoverageConfig, None)}
+          "occupancy": (OccupancyConfig, None), "coverage": (CoverageConfig, None),
+          "ego_noise": (EgoNoiseConfig, None)}
 
 
 def _comments(cls) -> dict[str, str]:

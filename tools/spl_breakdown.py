@@ -11,7 +11,7 @@ run, deterministic per seed) the behaviour's events cut the true trajectory into
   ``(probe)``;
 * ``baseline step`` (a step across a bearing to triangulate it), ``explore``, ``recover`` (contacts, back-offs,
   escapes), ``other``;
-* apart, overlapping those: ``[inside the success radius]``, the metres driven within the success radius of the
+* apart, overlapping those: ``[inside the find radius]``, the metres driven within the find radius (1.5 m) of the
   caller before she was declared found.
 
 Prints the metres per category over all legs that end in a find, the worst legs, and one JSON line.
@@ -38,20 +38,21 @@ import numpy as np  # noqa: E402
 
 PROBE_SIGMA_M = 1.0        # planner.PlannerConfig.probe_sigma_m: above it a target is driven at by a probe
 PROBE_BEARING_DEG = 20.0   # a probe's bearing this close to a caller's is toward her
-INSIDE = "[inside the success radius]"
+INSIDE = "[inside the find radius]"
 
 
 def _run(scenario: str, seed: int, time_limit: float | None) -> dict:
     from ssl_sim.runner import RescueRun
     from ssl_sim.scenario import load_scenario
+    from ssl_sim.scoring import FIND_BASE_RADIUS_M
     t0 = time.process_time()
     run = RescueRun(load_scenario(scenario).with_overrides(time_limit_s=time_limit), seed=seed)
     res = run.run()
     traj = np.array(run.trajectory)[:, :3]
     return {"seed": seed, "n_found": res["n_found"], "n_victims": res["n_victims"], "spl": res["spl"],
-            "false_found": len(res["false_positives"]), "end": res["sim_time_s"], "victims": res["victims"],
+            "false_found": len(res["false_finds"]), "end": res["sim_time_s"], "victims": res["victims"],
             "callers": [tuple(s.position[:2]) for s in run.sources[:run.n_victims]],
-            "radius": run.scenario.success_radius_m, "t": traj[:, 0], "xy": traj[:, 1:], "cum": np.array(run.cum_path),
+            "radius": FIND_BASE_RADIUS_M, "t": traj[:, 0], "xy": traj[:, 1:], "cum": np.array(run.cum_path),
             "events": [(e.time, e.decision.value, e.reason, dict(e.data)) for e in run.events],
             "cpu_s": time.process_time() - t0}
 

@@ -78,7 +78,7 @@ def _run(args: argparse.Namespace) -> int:
 
 def _sweep(args: argparse.Namespace) -> int:
     from ssl_sim.runner import output_dir
-    from ssl_sim.sweep import markdown_table, parse_seeds, run_sweep, summarize, write_tables
+    from ssl_sim.sweep import interval_table, markdown_table, parse_seeds, run_sweep, summarize, write_tables
 
     if args.suite is not None:
         from ssl_sim.suite import scenarios
@@ -100,6 +100,7 @@ def _sweep(args: argparse.Namespace) -> int:
                          time_limit_s=args.time_limit, progress=not args.quiet)
         tables = summarize(rows)
         paths = write_tables(rows, tables, args.out)
+    print(interval_table(tables["families"]))
     print(markdown_table(tables["scenarios"]))
     print(markdown_table(tables["victims"]))
     print("wrote " + ", ".join(str(p) for p in paths.values()))
@@ -203,7 +204,8 @@ def build_parser() -> argparse.ArgumentParser:
                    help="Dask scheduler address (needs the 'cluster' extra); default: local processes")
     s.add_argument("--workers", type=int, default=None, help="local worker processes (default: CPU count)")
     s.add_argument("--time-limit", type=float, default=None, help="override every scenario's time limit (s)")
-    s.add_argument("--out", default="out/sweep", help="directory for runs.csv, scenarios.csv, victims.csv, summary.md")
+    s.add_argument("--out", default="out/sweep", help="directory for runs.csv, families.csv, scenarios.csv, "
+                   "victims.csv, summary.md, summary.json and sweep.png")
     s.add_argument("-q", "--quiet", action="store_true", help="no progress bar")
     s.set_defaults(func=_sweep)
 

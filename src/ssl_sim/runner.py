@@ -6,27 +6,27 @@ the simulated HAL (``ssl_sim.backends``), scored against the ground truth.
 
 What is measured (all from the simulator's truth, never from the robot's own estimates):
 
-* **found**: when the behaviour declares a victim (``victim_found`` event), the robot's true base
-  position must be within ``success_radius_m`` (horizontal) of a true victim not found before;
-  the nearest such victim is credited, otherwise the declaration is a false positive. Only finds
-  at or before ``time_limit_s`` count. The run ends when every victim is found, the behaviour
-  finishes (stuck, fault, ``max_victims``) or the time limit passes (at the next step boundary).
+* **found**, **false finds**, **reached** and **SPL**: every ``victim_found`` declaration (its reported position
+  is the behaviour's map estimate, the robot base the truth at that moment) is scored by ``ssl_sim.scoring``,
+  the one definition shared with the sweep, the benchmarks and the gym env (``docs/design/scoring.md``): a find
+  is a report within 0.5 m of an unfound victim with the base within 1.5 m of her, in time; SPL per victim on
+  its graph, to within 1.5 m of her, legs in the order found. The run ends when every victim is found, the
+  behaviour finishes (stuck, fault, ``max_victims``) or the time limit passes (at the next step boundary).
 * **path**: length of the true horizontal path of the base; **collisions**: contact episodes of
   the robot with walls or non-climbable obstacles (sampled every control tick; contacts less than
   ``COLLISION_GAP_S`` apart belong to one episode).
-* **shortest paths**: geodesic distance on a 5 cm occupancy grid of the free space (obstacles
-  inflated by the bumper radius, 8-connected, Dijkstra with ``scipy.sparse.csgraph``) from where
-  a leg starts to anywhere within ``success_radius_m`` of the victim; straight-line lower bounds
-  are reported too. **SPL** per victim = found x shortest / max(actual, shortest) for the leg
-  that ended at its find (the leg starts at the start or at the previous find); 0 if not found.
-  **reachable floor**: the area (m^2) within ``success_radius_m`` of a victim where the robot centre can
-  stand, reachable from the start: a victim buried where it is ~0 can hardly be credited by any behaviour
-  (dense_pump's caller in the void: 0.0025 m^2, one 5 cm cell 0.72 m from her; every other shipped victim
-  1.1-1.8 m^2).
+* **shortest paths** (``scoring.FreeSpaceGraph``) from the start to within 1.5 m of each victim, with
+  straight-line lower bounds beside them. **reachable floor**: the area (m^2) within 1.5 m of a victim where
+  the robot centre can stand, reachable from the start (0: no behaviour can be credited with her).
 * **listens**: every localization with its detections against the true directions of all
   sources in the ARRAY frame at the listening pose (each detection is matched to the nearest
   source that was sounding during the block; errors in degrees).
 * **wall clock**: seconds spent in physics, acoustics, localization and the rest.
+
+results.json also lists every declaration (``declarations``: reported position, base position, its kind:
+find, false_find, too_far or late), the false finds alone (``false_finds``), ``n_reached``, the scoring
+constants (``scoring``) and where the result came from (``provenance``: commit, package versions, BLAS kernel,
+CPU).
 """
 from __future__ import annotations
 
@@ -42,8 +42,6 @@ from pathlib import Path
 from typing import Any
 
 import numpy as np
-from scipy import sparse
-from scipy.sparse.csgraph import dijkstra
 
 from robot.odometry import Odometry, wrap_angle
 from robot.ranging import RangeLayout, ray_ends
@@ -57,80 +55,16 @@ from ssl_sim.acoustics import AcousticSimulator
 from ssl_sim.backends import SimAudioSource, array_frame_directions
 from robot.interrupt import check_interrupt
 from ssl_sim.physics import SimClock, SimDriveBase, SimRobot
-from ssl_sim.physics.scene_gen import ROBOT_RADIUS, free_space_grid
+from ssl_sim.provenance import provenance
 from ssl_sim.scenario import Scenario, load_scenario
+from ssl_sim.scoring import FIND_BASE_RADIUS_M, SCORING, FreeSpaceGraph, Judge, leg_spls, run_spl
 from ssl_sim.viz import NullLogger, RunLogger, make_logger
 from ssl_sim.world import World
 
-__all__ = ["RescueRun", "run_scenario", "write_results", "FreeSpacePaths", "odometry_drift"]
+__all__ = ["RescueRun", "run_scenario", "write_results", "odometry_drift"]
 
 #: A robot contact with a wall or blocking obstacle after this long without one is a new collision (s).
 COLLISION_GAP_S = 0.5
-
-
-# ----------------------------------------------------------------------------- shortest paths
-class FreeSpacePaths:
-    """Geodesic distances (m) for the robot centre in ``world``: a ``res`` m grid of the free floor
-    (blocking obstacles and walls grown by ``inflate`` m), 16-connected (king + knight moves: path
-    lengths within ~3 % of the Euclidean geodesic instead of ~8 % with 8 neighbours), Dijkstra."""
-
-    def __init__(self, world: World, inflate: float = ROBOT_RADIUS, res: float = 0.05) -> None:
-        free, centres = free_space_grid(world, inflate=inflate, res=res)
-        self.res = res
-        self.nx, self.ny = free.shape
-        self.free = free
-        self.centres = centres.reshape(-1, 2)
-        idx = np.full(free.shape, -1, dtype=np.int64)
-        idx[free] = np.arange(int(free.sum()))
-        self._idx = idx
-        self._cells = self.centres[free.ravel()]
-        rows, cols, w = [], [], []
-        for di, dj in ((1, 0), (0, 1), (1, 1), (1, -1), (2, 1), (1, 2), (2, -1), (1, -2)):
-            j0, j1 = max(0, -dj), self.ny - max(0, dj)  # columns j with j + dj inside the grid
-            a = idx[0:self.nx - di, j0:j1]
-            b = idx[di:self.nx, j0 + dj:j1 + dj]
-            ok = (a >= 0) & (b >= 0)
-            rows.append(a[ok])
-            cols.append(b[ok])
-            w.append(np.full(int(ok.sum()), res * math.hypot(di, dj)))
-        r, c, ww = np.concatenate(rows), np.concatenate(cols), np.concatenate(w)
-        n = len(self._cells)
-        self.graph = sparse.coo_matrix((ww, (r, c)), shape=(n, n)).tocsr()
-
-    def reachable_area(self, start_xy, goal_xy, radius: float) -> float:
-        """Floor (m^2) where the robot centre can stand within ``radius`` of ``goal_xy``, reachable from
-        ``start_xy``: the room a find of a victim there leaves (0: none can be credited)."""
-        if not len(self._cells):
-            return 0.0
-        k = int(np.argmin(np.hypot(*(self._cells - np.asarray(start_xy, float)[:2]).T)))
-        reach = np.isfinite(dijkstra(self.graph, directed=False, indices=k))
-        near = np.hypot(*(self._cells - np.asarray(goal_xy, float)[:2]).T) <= radius
-        return float(np.count_nonzero(reach & near)) * self.res ** 2
-
-    def distance(self, start_xy, goal_xy, radius: float) -> float:
-        """Shortest free path (m) from ``start_xy`` to within ``radius`` of ``goal_xy``; inf if none.
-
-        A start off the free grid (e.g. touching an obstacle) snaps to the nearest free cell,
-        adding that straight distance."""
-        if not len(self._cells):
-            return math.inf
-        s = np.asarray(start_xy, float)[:2]
-        d0 = np.hypot(*(self._cells - s).T)
-        k = int(np.argmin(d0))
-        if math.hypot(*(s - np.asarray(goal_xy, float)[:2])) <= radius:
-            return 0.0
-        dist = dijkstra(self.graph, directed=False, indices=k)
-        dg = np.hypot(*(self._cells - np.asarray(goal_xy, float)[:2]).T)
-        near = dg <= radius
-        if np.any(near):
-            best = float(np.min(dist[near]))
-        else:  # the goal region holds no cell centre: the reachable cell nearest to it, plus the rest
-            reach = np.isfinite(dist)
-            if not np.any(reach):
-                return math.inf
-            j = np.flatnonzero(reach)[int(np.argmin(dg[reach]))]
-            best = float(dist[j] + max(0.0, dg[j] - radius))
-        return best + float(d0[k]) if math.isfinite(best) else math.inf
 
 
 # ----------------------------------------------------------------------------- instrumentation
@@ -225,7 +159,8 @@ class RescueRun:
             stages["coverage"] = replace(stages["coverage"], area=(0.0, 0.0, *map(float, world.room.size[:2])))
         self.behaviour = RescueBehaviour(self.mic_health, self.drive, self.clock, self.localizer, sc.behaviour,
                                          params=robot.params, start_pose=world.robot_start, **stages)
-        self.paths = FreeSpacePaths(world)
+        self.paths = FreeSpaceGraph(world)
+        self.judge = Judge([s.position for s in self.sources[: self.n_victims]], sc.time_limit_s)
         # truth bookkeeping
         self._obstacle_blocks = [not b.climbable for b in world.obstacles]
         self.trajectory: list[tuple[float, float, float, float, float]] = []  # t, x, y, z, yaw
@@ -233,8 +168,9 @@ class RescueRun:
         self.collisions: list[dict] = []
         self._last_contact_t = -math.inf
         self.listens: list[dict] = []
-        self.found: dict[int, dict] = {}
-        self.false_positives: list[dict] = []
+        self.found: dict[int, dict] = {}       # victim -> the declaration that found her
+        self.declarations: list[dict] = []     # every declaration with its judgement
+        self._find_legs: list[tuple[int, tuple[float, float], float]] = []   # victim, base xy, path (m), in order
         self.events: list[RescueEvent] = []
         self._last_block: tuple[int, int] | None = None
         self._ticks = 0
@@ -357,18 +293,19 @@ class RescueRun:
                     self.logger.target(ev.time, origin, rot @ _unit(ev.data["azimuth"], ev.data["elevation"]))
             if ev.decision is not Decision.VICTIM_FOUND:
                 continue
-            _, x, y, _, yaw = self._pose_at(ev.time)
+            _, x, y, _, _ = self._pose_at(ev.time)
             est = ev.data.get("position", (math.nan, math.nan))
-            dists = [math.hypot(x - s.position[0], y - s.position[1]) for s in self.sources[: self.n_victims]]
-            cands = [i for i in range(self.n_victims) if i not in self.found and dists[i] <= sc.success_radius_m]
-            entry = {"time_s": _r(ev.time, 2), "criterion": ev.data.get("criterion", ""),
-                     "estimate": [_r(est[0]), _r(est[1])], "robot_position": [_r(x), _r(y)]}
-            if cands and ev.time <= sc.time_limit_s + 1e-9:
-                i = min(cands, key=lambda k: dists[k])
-                v = self.sources[i].position
-                entry.update({"robot_distance_m": _r(dists[i]),
-                              "estimate_error_m": _r(math.hypot(est[0] - v[0], est[1] - v[1]))})
-                self.found[i] = entry
+            j = self.judge.declare(ev.time, est, (x, y))
+            entry = {"time_s": _r(ev.time, 2), "criterion": ev.data.get("criterion", ""), "kind": j.kind,
+                     "estimate": [_r(est[0]), _r(est[1])], "robot_position": [_r(x), _r(y)],
+                     "victim": self.sources[j.victim].name if j.victim is not None else None,
+                     "estimate_error_m": _r(j.report_error_m), "robot_distance_m": _r(j.base_distance_m),
+                     "reached": self.sources[j.reached].name if j.reached is not None else None,
+                     "late": j.late}
+            self.declarations.append(entry)
+            if j.kind == "find":
+                self.found[j.victim] = entry
+                self._find_legs.append((j.victim, (x, y), self._path_at(ev.time)))  # unrounded, for SPL
                 if self.logger.enabled:
                     order = sorted(self.found)
                     h = [ev.data.get("height", 0.1)] * len(order)
@@ -376,12 +313,6 @@ class RescueRun:
                     self.logger.found(ev.time, est, np.array([self.sources[k].position for k in order]),
                                       [f"{self.sources[k].name} (off {self.found[k]['estimate_error_m']:.2f} m)"
                                        for k in order])
-            else:
-                i = int(np.argmin(dists)) if dists else None
-                entry.update({"nearest_victim": self.sources[i].name if i is not None else None,
-                              "nearest_distance_m": _r(dists[i]) if i is not None else None,
-                              "late": ev.time > sc.time_limit_s})
-                self.false_positives.append(entry)
 
     def _log_map(self) -> None:
         """The behaviour's own picture: sound map, plan, learned obstacles, listening coverage (odometry frame =
@@ -448,32 +379,27 @@ class RescueRun:
 
     def _results(self, end_reason: str, loop_s: float) -> dict[str, Any]:
         sc = self.scenario
-        victims = []
-        prev_t, prev_xy = 0.0, self.world.robot_start[:2]
-        legs = {}
-        for i in sorted(self.found, key=lambda k: self.found[k]["time_s"]):
-            t = self.found[i]["time_s"]
-            _, x, y, _, _ = self._pose_at(t)
-            legs[i] = (prev_xy, self._path_at(t) - self._path_at(prev_t))
-            prev_t, prev_xy = t, (x, y)
         start = self.world.robot_start[:2]
+        vxy = [s.position[:2] for s in self.sources[: self.n_victims]]
+        legs = {leg.victim: leg for leg in leg_spls(self.paths, vxy, start, self._find_legs)}
+        reached = {k: j.time_s for k, j in self.judge.reached.items()}
+        victims = []
         for i in range(self.n_victims):
             s = self.sources[i]
             row = {"name": s.name, "position": list(s.position), "buried": s.buried, "level_db_spl": s.level_db_spl,
-                   "found": i in self.found, "time_s": None,
-                   "shortest_path_from_start_m": _r(self.paths.distance(start, s.position, sc.success_radius_m)),
+                   "found": i in self.found, "time_s": None, "reached": i in reached,
+                   "reached_time_s": _r(reached.get(i), 2),
+                   "shortest_path_from_start_m": _r(self.paths.shortest_path(start, s.position, FIND_BASE_RADIUS_M)),
                    "straight_line_from_start_m": _r(max(0.0, math.hypot(s.position[0] - start[0],
                                                                         s.position[1] - start[1])
-                                                        - sc.success_radius_m)),
-                   "reachable_floor_m2": _r(self.paths.reachable_area(start, s.position, sc.success_radius_m), 4),
+                                                        - FIND_BASE_RADIUS_M)),
+                   "reachable_floor_m2": _r(self.paths.reachable_area(start, s.position, FIND_BASE_RADIUS_M), 4),
                    "spl": 0.0}
             if i in self.found:
-                leg_start, leg_path = legs[i]
-                shortest = self.paths.distance(leg_start, s.position, sc.success_radius_m)
-                row.update(self.found[i])
-                row.update({"leg_start": [_r(leg_start[0]), _r(leg_start[1])], "leg_path_m": _r(leg_path),
-                            "leg_shortest_path_m": _r(shortest),
-                            "spl": _r(shortest / max(leg_path, shortest, 1e-9), 4) if math.isfinite(shortest) else 0.0})
+                leg = legs[i]
+                row.update({k: v for k, v in self.found[i].items() if k not in ("kind", "victim")})
+                row.update({"leg_start": [_r(leg.start_xy[0]), _r(leg.start_xy[1])], "leg_path_m": _r(leg.path_m),
+                            "leg_shortest_path_m": _r(leg.shortest_m), "spl": leg.spl})
             victims.append(row)
         errs = np.array([d["error_deg"] for rec in self.listens for d in rec["detections"] if "error_deg" in d])
         first = np.array([rec["detections"][0]["error_deg"] for rec in self.listens
@@ -494,11 +420,13 @@ class RescueRun:
             "scenario": sc.name, "scenario_file": sc.path, "seed": self.seed, "scene": self.world.name,
             "description": sc.description,
             "n_victims": self.n_victims, "n_found": len(self.found), "success": len(self.found) == self.n_victims,
+            "n_reached": len(reached),
             "end_reason": end_reason, "failure": self.failure, "time_limit_s": sc.time_limit_s,
             "sim_time_s": _r(sim_t, 2),
-            "success_radius_m": sc.success_radius_m,
-            "victims": victims, "false_positives": self.false_positives,
-            "spl": _r(float(np.mean([v["spl"] for v in victims])) if victims else 0.0, 4),
+            "scoring": SCORING,
+            "victims": victims, "false_finds": [d for d in self.declarations if d["kind"] == "false_find"],
+            "declarations": self.declarations,
+            "spl": run_spl(self.n_victims, list(legs.values())),
             "path_length_m": _r(self.cum_path[-1]), "collisions": len(self.collisions),
             "collision_log": self.collisions, "bumper_recoveries": bumps,
             "range_stops": sum(1 for e in self.events if e.decision is Decision.OBSTACLE),
@@ -512,6 +440,7 @@ class RescueRun:
                        **{k: asdict(v) for k, v in sc.stage_configs().items()},
                        "acoustics": dict(sc.acoustics),
                        "noise": asdict(sc.noise) if sc.noise is not None else None},
+            "provenance": provenance(),
             "wall_clock_s": {"setup": _r(self.setup_s, 3), "loop": _r(loop_s, 3), "physics": _r(phys, 3),
                              "acoustics": _r(acou, 3), "localization": _r(loc, 3),
                              "other": _r(loop_s - phys - acou - loc, 3),
@@ -653,11 +582,13 @@ def format_summary(result: dict) -> str:
                          f"estimate off by {v['estimate_error_m']:.2f} m; leg {v['leg_path_m']:.2f} m driven vs "
                          f"{v['leg_shortest_path_m']:.2f} m shortest (SPL {v['spl']:.2f}); {v['criterion']}")
         else:
-            lines.append(f"  {v['name']:<14} NOT found (shortest path from start {v['shortest_path_from_start_m']} m, "
-                         f"{v['reachable_floor_m2']} m^2 of reachable floor within the success radius)")
-    for fp in r["false_positives"]:
-        lines.append(f"  false positive at {fp['time_s']} s: robot {fp['nearest_distance_m']} m from "
-                     f"{fp['nearest_victim']}")
+            lines.append(f"  {v['name']:<14} NOT found{' (reached)' if v['reached'] else ''} (shortest path from "
+                         f"start {v['shortest_path_from_start_m']} m, {v['reachable_floor_m2']} m^2 of reachable "
+                         "floor within 1.5 m)")
+    for d in r["declarations"]:
+        if d["kind"] != "find":
+            lines.append(f"  {d['kind'].replace('_', ' ')} at {d['time_s']} s: report {d['estimate_error_m']} m and "
+                         f"robot {d['robot_distance_m']} m from {d['victim']}")
     a = r["angular_error_deg"]["all_detections"]
     err = (f"median {a['median']:.1f} deg, mean {a['mean']:.1f} deg, p90 {a['p90']:.1f} deg over {a['n']} detections"
            if a["n"] else "no detections")

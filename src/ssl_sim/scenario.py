@@ -9,8 +9,7 @@ of the robot start in radians. Example (``ssl_sim/scenarios/paper_lab.toml``)::
     description = "The paper's empty lab, one caller 1.5 m ahead"
     seed = 0                 # default run seed (voices, noise, sensor; generated scenes)
     time_limit_s = 60.0      # simulated time
-    success_radius_m = 0.75  # a victim counts as found when the robot declares it within this
-                             # horizontal distance of the array centre (truth, not the estimate)
+    # finds are scored by ssl_sim.scoring, the same for every scenario (docs/design/scoring.md)
 
     [scene]
     name = "empty_lab"       # a shipped scene; or file = "my_scene.toml" (World TOML, relative to
@@ -80,6 +79,7 @@ from ssl_sim.physics.robot_model import RobotModelConfig
 from ssl_sim.physics.scene_gen import PRESETS, generate_world, reachable_victims
 from ssl_sim.physics.scenes import load_scene, scene_names
 from ssl_sim.resources import SCENARIOS_DIR
+from ssl_sim.scoring import FIND_BASE_RADIUS_M, FIND_REPORT_RADIUS_M, REACHED_RADIUS_M
 from ssl_sim.world import VictimSite, World
 
 DEFAULT_SCENARIO = "paper_lab"
@@ -155,7 +155,6 @@ class Scenario:
     description: str = ""
     seed: int = 0
     time_limit_s: float = 120.0
-    success_radius_m: float = 0.75
     robot_start: tuple[float, float, float] | None = None
     noise: AmbientNoise | None = field(default_factory=AmbientNoise)
     # The drive's own motor noise while the wheels turn (part of the world: on unless the scenario says
@@ -332,9 +331,9 @@ def _check_world(world: World, sc: Scenario, where: str) -> None:
             b = world.obstacles[hit]
             raise ScenarioError(f"{where}{field_name}: {list(v.position)} is inside obstacle {hit} ({b.kind}, "
                                 f"centre {list(b.center)}, size {list(b.size)}); a victim's mouth must be in air")
-        if math.hypot(p[0] - x, p[1] - y) < sc.success_radius_m:
-            raise ScenarioError(f"{where}{field_name}: {list(v.position)} is within success_radius_m = "
-                                f"{sc.success_radius_m} m of the robot start: found before starting")
+        if math.hypot(p[0] - x, p[1] - y) < REACHED_RADIUS_M:
+            raise ScenarioError(f"{where}{field_name}: {list(v.position)} is within {REACHED_RADIUS_M} m of the "
+                                "robot start: reached before starting")
     for j, s in enumerate(sc.interferers):
         if not room.contains(s.position, margin=0.05):
             raise ScenarioError(f"{where}interferers[{j}].position: {list(s.position)} is outside the room "
@@ -343,11 +342,11 @@ def _check_world(world: World, sc: Scenario, where: str) -> None:
         if hit is not None:
             raise ScenarioError(f"{where}interferers[{j}].position: {list(s.position)} is inside obstacle {hit} "
                                 f"({world.obstacles[hit].kind} at {list(world.obstacles[hit].center)})")
-    ok = reachable_victims(world, reach=sc.success_radius_m)
+    ok = reachable_victims(world, reach=FIND_BASE_RADIUS_M)
     for i in np.flatnonzero(~ok):
         field_name = f"victims[{i}].position" if i < n_explicit else f"scene victim site {i - n_explicit}"
         raise ScenarioError(f"{where}{field_name}: {list(world.victims[i].position)} cannot be reached: no free "
-                            f"path from the robot start to within success_radius_m = {sc.success_radius_m} m")
+                            f"path from the robot start to within {FIND_BASE_RADIUS_M} m (where a find is confirmed)")
 
 
 def _footprint_distance(box, x: float, y: float) -> float:
@@ -428,9 +427,12 @@ def parse_scenario(data: dict, base_dir: str | Path = ".", path: str = "") -> Sc
     time_limit = _get(data, "time_limit_s", float, where, default=120.0)
     if not time_limit > 0:
         raise err(f"time_limit_s: expected a duration > 0 s, got {time_limit}")
-    radius = _get(data, "success_radius_m", float, where, default=0.75)
-    if not radius > 0:
-        raise err(f"success_radius_m: expected > 0 m, got {radius}")
+    # Older files name the former success criterion; it is now the fixed "reached" radius of ssl_sim.scoring.
+    radius = _get(data, "success_radius_m", float, where, default=REACHED_RADIUS_M)
+    if radius != REACHED_RADIUS_M:
+        raise err(f"success_radius_m: no longer a scenario setting (finds are scored by ssl_sim.scoring: a report "
+                  f"within {FIND_REPORT_RADIUS_M} m of a victim with the robot within {FIND_BASE_RADIUS_M} m; "
+                  f"'reached' is {REACHED_RADIUS_M} m); expected {REACHED_RADIUS_M} or no key, got {radius}")
 
     scene = _scene(_table(data, "scene", where, required=True), base_dir, where)
     robot = _table(data, "robot", where)
@@ -477,7 +479,7 @@ def parse_scenario(data: dict, base_dir: str | Path = ".", path: str = "") -> Sc
                                ("occupancy", OccupancyConfig), ("coverage", CoverageConfig))}
     return Scenario(name=name, scene=scene, victims=victims, interferers=interferers,
                     description=_get(data, "description", str, where, default=""), seed=seed,
-                    time_limit_s=time_limit, success_radius_m=radius, robot_start=start, noise=noise, ego_noise=ego_noise,
+                    time_limit_s=time_limit, robot_start=start, noise=noise, ego_noise=ego_noise,
                     acoustics=acoustics, localizer=localizer, behaviour=behaviour, path=str(path), **stages)
 
 

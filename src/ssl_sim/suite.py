@@ -21,9 +21,8 @@ parameters are chosen on ``train``; ``test`` is reported, never tuned on (docs/d
 
 **Solvable by construction.** A draw is kept only if the scenario loader accepts it exactly as it accepts a
 shipped file (a written copy is read back by ``load_scenario``: victims in air and in the room, start on free
-floor, every victim reachable from the start to within ``success_radius_m`` = 0.75 m on the free-space grid with
-obstacles grown by the robot radius) and if moreover every victim has reachable floor within
-``FIND_BASE_RADIUS_M`` (1.5 m), lies at least ``MIN_START_DISTANCE_M`` from the start, ``MIN_VICTIM_SPACING_M``
+floor, every victim with floor reachable from the start within 1.5 m on the free-space grid with obstacles grown
+by the robot radius; the suite checks that again on its own, ``FIND_BASE_RADIUS_M``), and if every victim lies at least ``MIN_START_DISTANCE_M`` from the start, ``MIN_VICTIM_SPACING_M``
 from the others and ``MIN_INTERFERER_DISTANCE_M`` from every interferer (a report at a machine is never a find).
 Otherwise the next attempt of the same seed is drawn.
 
@@ -77,7 +76,6 @@ FIND_BASE_RADIUS_M = 1.5        # a find needs the robot's base this close to he
 MIN_START_DISTANCE_M = 2.0      # no victim found from the start without moving
 MIN_VICTIM_SPACING_M = 1.2      # two victims never within one 0.5 m report radius of each other
 MIN_INTERFERER_DISTANCE_M = 1.5
-SUCCESS_RADIUS_M = 0.75         # the scenario field ("reached"), written explicitly
 MAX_ATTEMPTS = 40
 
 #: The robot's configuration in every suite scenario (one for all: the robot does not know the scene): several
@@ -269,7 +267,6 @@ def _draw(split: str, index: int, rng: np.random.Generator, n_victims: int,
                         f"({split} split, suite v{SUITE_VERSION})"),
         "seed": seed,
         "time_limit_s": _time_limit_s(size, len(victims)),
-        "success_radius_m": SUCCESS_RADIUS_M,
         "robot": {"start": list(world.robot_start)},
         "victims": victims,
         "interferers": interferers,
@@ -367,7 +364,7 @@ def _config_table(obj: Any, default: Any, what: str) -> dict[str, Any]:
 def _scenario_table(sc: Scenario) -> dict[str, Any]:
     """The TOML table of ``sc`` (config tables hold the fields that differ from the loader's defaults)."""
     data: dict[str, Any] = {"name": sc.name, "description": sc.description, "seed": sc.seed,
-                            "time_limit_s": sc.time_limit_s, "success_radius_m": sc.success_radius_m}
+                            "time_limit_s": sc.time_limit_s}
     if sc.robot_start is not None:
         data["robot"] = {"start": list(sc.robot_start)}
     vs = []
@@ -406,7 +403,7 @@ def _scenario_table(sc: Scenario) -> dict[str, Any]:
 
 def _table_toml(data: dict[str, Any], scene_file: str) -> str:
     lines = ["# A generated rescue scenario (ssl_sim.suite); run it with: ssl-rescue run THIS_FILE"]
-    for k in ("name", "description", "seed", "time_limit_s", "success_radius_m"):
+    for k in ("name", "description", "seed", "time_limit_s"):
         lines.append(f"{k} = {_toml_value(data[k])}")
     lines += ["", "[scene]", f"file = {_toml_value(scene_file)}"]
     for key in ("robot", "noise", "acoustics", "localizer", "behaviour", "motion", "sound_map", "planner",

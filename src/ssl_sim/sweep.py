@@ -2,7 +2,7 @@
 
     rows = run_sweep(["paper_lab", "light_rubble_three"], range(10))                  # local processes
     rows = run_sweep([...], range(100), cluster="tcp://scheduler:8786")               # Dask distributed
-    tables = summarize(rows); write_tables(rows, tables, "out/sweep")                 # CSV + markdown
+    tables = summarize(rows); write_tables(rows, tables, "out/sweep")                 # CSV, markdown, PNG
 
 One code path for both engines: anything with ``submit(fn, *args) -> future`` and
 ``future.result()`` (``concurrent.futures.ProcessPoolExecutor`` or ``distributed.Client``, whose
@@ -10,12 +10,16 @@ API mirrors it). Each task's World is built here on the client and shipped with 
 workers need the installed package but no scene or voice files. Every run is deterministic for its
 seed; rows come back in (scenario, seed) order whatever order the workers finish in.
 
-Shortest paths for SPL: grid geodesics on the free floor (see ``ssl_sim.runner``), not straight lines.
+Scores come from the runner, i.e. ``ssl_sim.scoring`` (finds are reports, SPL on the one free-space graph);
+the tables give every metric per scene family with its 95 % bootstrap interval over scenarios
+(``ssl_sim.stats``), and the summary names the commit, package versions, BLAS kernel and CPU
+(``ssl_sim.provenance``).
 """
 from __future__ import annotations
 
 import concurrent.futures as cf
 import csv
+import json
 import math
 import multiprocessing
 import time
@@ -24,16 +28,18 @@ from typing import Any, Iterable, Sequence
 
 import numpy as np
 
+from ssl_sim import stats
+from ssl_sim.provenance import provenance
 from ssl_sim.runner import RescueRun
 from ssl_sim.scenario import Scenario, ScenarioError, load_scenario
 from ssl_sim.world import World
 
-__all__ = ["parse_seeds", "run_one", "run_sweep", "summarize", "write_tables", "markdown_table",
-           "DETERMINISTIC_RUN_COLUMNS"]
+__all__ = ["parse_seeds", "run_one", "row_from_result", "run_sweep", "summarize", "write_tables", "markdown_table",
+           "interval_table", "DETERMINISTIC_RUN_COLUMNS"]
 
 #: Run-table columns that depend only on (scenario, seed): equal across machines and engines.
-DETERMINISTIC_RUN_COLUMNS = ("scenario", "seed", "success", "n_found", "n_victims", "end_reason", "sim_time_s",
-                             "path_length_m", "collisions", "false_positives", "spl", "n_listens",
+DETERMINISTIC_RUN_COLUMNS = ("scenario", "seed", "success", "n_found", "n_victims", "n_reached", "end_reason",
+                             "sim_time_s", "path_length_m", "collisions", "false_finds", "spl", "n_listens",
                              "ang_err_median_deg", "ang_err_mean_deg", "ang_err_p90_deg", "victim_times")
 
 
@@ -54,24 +60,36 @@ def parse_seeds(text: str) -> list[int]:
     return seeds
 
 
-def run_one(scenario: Scenario, seed: int, world: World | None = None) -> dict[str, Any]:
-    """One run -> a flat summary row (the full per-listen record stays out of the table)."""
-    t0 = time.perf_counter()
-    r = RescueRun(scenario, seed=seed, world=world).run()
+def row_from_result(r: dict[str, Any], family: str | None = None) -> dict[str, Any]:
+    """A runner result (results.json) -> a flat summary row (the full per-listen record stays out of the table).
+    ``family``: the scene family the row is summarized under (default: the scenario name)."""
     ang = r["angular_error_deg"]["all_detections"]
-    wall = time.perf_counter() - t0
+    found = [v for v in r["victims"] if v["found"]]
     return {
-        "scenario": r["scenario"], "seed": seed, "success": r["success"], "n_found": r["n_found"],
-        "n_victims": r["n_victims"], "end_reason": r["end_reason"], "sim_time_s": r["sim_time_s"],
+        "scenario": r["scenario"], "family": family or r["scenario"], "seed": r["seed"], "success": r["success"],
+        "n_found": r["n_found"], "n_victims": r["n_victims"], "n_reached": r["n_reached"],
+        "end_reason": r["end_reason"], "sim_time_s": r["sim_time_s"],
         "path_length_m": r["path_length_m"], "collisions": r["collisions"],
-        "false_positives": len(r["false_positives"]), "spl": r["spl"], "n_listens": r["n_listens"],
+        "false_finds": len(r["false_finds"]), "spl": r["spl"], "n_listens": r["n_listens"],
         "ang_err_median_deg": ang["median"], "ang_err_mean_deg": ang["mean"], "ang_err_p90_deg": ang["p90"],
         "victim_times": {v["name"]: v["time_s"] for v in r["victims"]},
         "victim_spl": {v["name"]: v["spl"] for v in r["victims"]},
+        "found_victims": [v["name"] for v in found],
+        "find_times_s": [v["time_s"] for v in found],
+        "position_errors_m": [v["estimate_error_m"] for v in found],
         "detection_errors_deg": [d["error_deg"] for rec in r["listens"] for d in rec["detections"]
                                  if "error_deg" in d],
-        "wall_s": round(wall, 3), "wall_per_sim_s": round(wall / max(r["sim_time_s"], 1e-9), 4),
+        "blas": r.get("provenance", {}).get("openblas_coretype", ""),
     }
+
+
+def run_one(scenario: Scenario, seed: int, world: World | None = None) -> dict[str, Any]:
+    """One run -> :func:`row_from_result` plus its wall-clock time."""
+    t0 = time.perf_counter()
+    r = RescueRun(scenario, seed=seed, world=world).run()
+    wall = time.perf_counter() - t0
+    return {**row_from_result(r, getattr(scenario, "family", None)), "wall_s": round(wall, 3),
+            "wall_per_sim_s": round(wall / max(r["sim_time_s"], 1e-9), 4)}
 
 
 def _is_dask(executor) -> bool:
@@ -154,12 +172,15 @@ def _mean(xs) -> float | None:
 
 
 def summarize(rows: Sequence[dict]) -> dict[str, list[dict]]:
-    """Per-scenario and per-victim tables from run rows.
+    """Per-family, per-scenario and per-victim tables from run rows.
 
-    ``scenarios``: runs, success rate (all victims found), victims found rate, mean SPL, mean path,
-    mean collisions, false positives per run, angular error of all detections (median, mean, p90,
-    pooled over runs), mean wall-clock per simulated second. ``victims``: per scenario and victim,
-    found rate, mean/median time to find (over the runs that found it), mean SPL."""
+    ``families`` (``ssl_sim.stats.summarize``): per scene family and over all, success rate, victims found,
+    SPL, time to find, false finds per run and position error, each with its 95 % bootstrap interval over
+    scenarios. ``scenarios``: runs, success rate (all victims found), victims found rate, victims reached rate
+    (base within 0.75 m at a declaration), mean SPL, mean path, mean collisions, false finds per run, angular
+    error of all detections (median, mean, p90, pooled over runs), mean wall-clock per simulated second.
+    ``victims``: per scenario and victim, found rate, mean/median time to find (over the runs that found it),
+    mean SPL."""
     by: dict[str, list[dict]] = {}
     for r in rows:
         by.setdefault(r["scenario"], []).append(r)
@@ -170,11 +191,13 @@ def summarize(rows: Sequence[dict]) -> dict[str, list[dict]]:
             "scenario": name, "runs": len(rs), "seeds": f"{min(r['seed'] for r in rs)}..{max(r['seed'] for r in rs)}",
             "success_rate": round(sum(r["success"] for r in rs) / len(rs), 4),
             "victims_found_rate": round(sum(r["n_found"] for r in rs) / max(sum(r["n_victims"] for r in rs), 1), 4),
+            "victims_reached_rate": round(sum(r["n_reached"] for r in rs) / max(sum(r["n_victims"] for r in rs), 1),
+                                          4),
             "mean_spl": _mean(r["spl"] for r in rs),
             "mean_sim_time_s": _mean(r["sim_time_s"] for r in rs),
             "mean_path_m": _mean(r["path_length_m"] for r in rs),
             "mean_collisions": _mean(r["collisions"] for r in rs),
-            "false_positives_per_run": _mean(r["false_positives"] for r in rs),
+            "false_finds_per_run": _mean(r["false_finds"] for r in rs),
             "ang_err_median_deg": round(float(np.median(errs)), 2) if errs.size else None,
             "ang_err_mean_deg": round(float(errs.mean()), 2) if errs.size else None,
             "ang_err_p90_deg": round(float(np.percentile(errs, 90)), 2) if errs.size else None,
@@ -190,7 +213,7 @@ def summarize(rows: Sequence[dict]) -> dict[str, list[dict]]:
                          "mean_time_to_find_s": _mean(found),
                          "median_time_to_find_s": round(float(np.median(found)), 2) if found else None,
                          "mean_spl": _mean(r["victim_spl"].get(v) for r in rs)})
-    return {"scenarios": scen, "victims": vict}
+    return {"families": stats.summarize(rows), "scenarios": scen, "victims": vict}
 
 
 def _cell(v) -> str:
@@ -212,9 +235,9 @@ def markdown_table(rows: Sequence[dict], columns: Sequence[str] | None = None) -
     return "\n".join(out) + "\n"
 
 
-_RUN_CSV_COLUMNS = ("scenario", "seed", "success", "n_found", "n_victims", "end_reason", "sim_time_s", "path_length_m",
-                    "collisions", "false_positives", "spl", "n_listens", "ang_err_median_deg", "ang_err_mean_deg",
-                    "ang_err_p90_deg", "wall_s", "wall_per_sim_s")
+_RUN_CSV_COLUMNS = ("scenario", "family", "seed", "blas", "success", "n_found", "n_victims", "n_reached", "end_reason",
+                    "sim_time_s", "path_length_m", "collisions", "false_finds", "spl", "n_listens",
+                    "ang_err_median_deg", "ang_err_mean_deg", "ang_err_p90_deg", "wall_s", "wall_per_sim_s")
 
 
 def _write_csv(path: Path, rows: Sequence[dict], columns: Sequence[str]) -> None:
@@ -225,23 +248,52 @@ def _write_csv(path: Path, rows: Sequence[dict], columns: Sequence[str]) -> None
             w.writerow({c: ("" if r.get(c) is None else r.get(c)) for c in columns})
 
 
+def interval_table(rows: Sequence[dict]) -> str:
+    """The families table as "mean [lo, hi]" cells."""
+    out = []
+    for r in rows:
+        row = {"family": r["family"], "scenarios": r["scenarios"]}
+        for m, (label, unit) in stats.METRICS.items():
+            iv = stats.Interval(*(math.nan if r[k] is None else r[k] for k in (m, f"{m}_lo", f"{m}_hi")),
+                                n=r["scenarios"])
+            row[f"{label}{f' ({unit})' if unit else ''}"] = iv.fmt(1 if unit == "s" else 2 if unit == "m" else 3)
+        out.append(row)
+    return markdown_table(out)
+
+
 def write_tables(rows: Sequence[dict], tables: dict[str, list[dict]], out_dir: str | Path) -> dict[str, Path]:
-    """``runs.csv`` (one row per run, victim times as ``t_<name>_s`` columns), ``scenarios.csv``,
-    ``victims.csv`` and ``summary.md`` (the two summary tables) in ``out_dir``."""
+    """``runs.csv`` (one row per run, victim times as ``t_<name>_s`` columns), ``families.csv`` (metrics with
+    95 % intervals), ``scenarios.csv``, ``victims.csv``, ``summary.md`` (the tables), ``summary.json``
+    (the tables and the provenance: commit, package versions, BLAS kernel, CPU) and ``sweep.png`` (success and
+    SPL per family with intervals, histogram of time to find) in ``out_dir``."""
     out = Path(out_dir)
     out.mkdir(parents=True, exist_ok=True)
     names = list(dict.fromkeys(v for r in rows for v in r["victim_times"]))
     flat = [{**r, **{f"t_{v}_s": r["victim_times"].get(v) for v in names}} for r in rows]
-    paths = {"runs": out / "runs.csv", "scenarios": out / "scenarios.csv", "victims": out / "victims.csv",
-             "markdown": out / "summary.md"}
+    paths = {"runs": out / "runs.csv", "families": out / "families.csv", "scenarios": out / "scenarios.csv",
+             "victims": out / "victims.csv", "markdown": out / "summary.md", "json": out / "summary.json",
+             "plot": out / "sweep.png"}
     _write_csv(paths["runs"], flat, list(_RUN_CSV_COLUMNS) + [f"t_{v}_s" for v in names])
-    if tables["scenarios"]:
-        _write_csv(paths["scenarios"], tables["scenarios"], list(tables["scenarios"][0]))
-    if tables["victims"]:
-        _write_csv(paths["victims"], tables["victims"], list(tables["victims"][0]))
-    md = ["# Rescue sweep", "", f"{len(rows)} runs. Success = every victim found within the time limit; "
-          "SPL = found x grid-geodesic shortest path / max(actual, shortest) per leg, averaged over victims; "
+    for key in ("families", "scenarios", "victims"):
+        if tables.get(key):
+            _write_csv(paths[key], tables[key], list(tables[key][0]))
+    prov = provenance()
+    pk = prov["machine"]["packages"]
+    md = ["# Rescue sweep", "", f"{len(rows)} runs. Scored by ssl_sim.scoring: a find is a declaration whose "
+          "reported position is within 0.5 m of an unfound victim with the robot base within 1.5 m of her; "
+          "false finds report > 0.5 m from every unfound victim; SPL = found x shortest path (to within 1.5 m, "
+          "16-connected free-space graph, no corner cutting) / max(driven, shortest) per leg, averaged over "
+          "victims; \"reached\" = base within 0.75 m at a declaration. Intervals: 95 % bootstrap over scenarios; "
           "angular errors pool every detection against the nearest sounding source (array frame).", "",
+          f"Commit {prov['commit'] or '?'}{' (uncommitted changes)' if prov['dirty'] else ''}; "
+          + ", ".join(f"{k} {v}" for k, v in pk.items())
+          + f"; OpenBLAS kernel {prov['openblas_coretype'] or 'CPU default'}"
+          f" ({'; '.join(prov['machine']['blas'])}); CPU {prov['machine']['cpu']} x {prov['machine']['cores']}.", "",
+          "## Scene families", "", interval_table(tables.get("families", [])),
           "## Scenarios", "", markdown_table(tables["scenarios"]), "## Victims", "", markdown_table(tables["victims"])]
     paths["markdown"].write_text("\n".join(md))
+    paths["json"].write_text(json.dumps({"provenance": prov, **tables}, indent=1, default=float))
+    from ssl_sim.plots import sweep_figure
+    sweep_figure(tables.get("families", []), [t for r in rows for t in r.get("find_times_s", [])], paths["plot"],
+                 title=f"Rescue sweep: {len(rows)} runs")
     return paths

@@ -45,15 +45,15 @@ class EgoNoiseConfig:
     tone and its harmonics. ``ism_order``: reflection order of the paths to the microphones. ``seed``:
     combined with the acoustic simulation's seed (tone phases, broadband noise)."""
 
-    level_db_spl_1m: float = 40.0
-    rated_speed: float = 20.0
-    min_speed: float = 0.05
-    gear_ratio: float = 34.0
-    pinion_teeth: int = 12
-    tonal_share: float = 0.5
+    level_db_spl_1m: float = 40.0   # SPL at 1 m of one motor at rated_speed (dB SPL)
+    rated_speed: float = 20.0       # wheel speed (rad/s) at which level_db_spl_1m holds
+    min_speed: float = 0.05         # below this wheel speed (rad/s) a motor is silent
+    gear_ratio: float = 34.0        # motor turns per wheel turn: the motor shaft turns this much faster
+    pinion_teeth: int = 12          # teeth of the motor pinion: mesh tone = shaft rate x teeth
+    tonal_share: float = 0.5        # fraction of the power in the mesh tone and its harmonics
     harmonics: tuple[float, ...] = (1.0, 0.5, 0.25)   # amplitudes of mesh harmonics 1, 2, 3
-    ism_order: int = 1
-    seed: int = 0
+    ism_order: int = 1              # reflection order of the paths from the motors to the microphones
+    seed: int = 0                   # combined with the acoustic simulation's seed (tone phases, broadband noise)
 
     def __post_init__(self) -> None:
         if not np.isfinite(self.level_db_spl_1m) or not -20 <= self.level_db_spl_1m <= 100:

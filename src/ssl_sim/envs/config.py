@@ -7,6 +7,7 @@ from dataclasses import dataclass, field, fields, replace
 from typing import Any
 
 from ssl_sim.physics.scene_gen import RubbleConfig
+from ssl_sim.scoring import FIND_BASE_RADIUS_M
 
 FIDELITIES = ("fast", "full")
 
@@ -131,7 +132,8 @@ class EnvConfig:
              f"> 0 and <= coarse_resolution_deg ({self.coarse_resolution_deg})")
         need(isinstance(self.n_detections, int) and 1 <= self.n_detections <= 8, "n_detections", "an integer 1..8")
         need(0 <= self.min_power < 1, "min_power", "0 <= power < 1")
-        need(0 < self.found_radius_m <= 3, "found_radius_m", "0 < m <= 3")
+        need(0 < self.found_radius_m <= FIND_BASE_RADIUS_M, "found_radius_m",
+             f"0 < m <= {FIND_BASE_RADIUS_M} (a find needs the robot within that of her, ssl_sim.scoring)")
         need(0 < self.tip_limit_deg < 90, "tip_limit_deg", "0 < deg < 90")
         if self.rerun is not None:
             from ssl_sim.viz import parse_rerun_target

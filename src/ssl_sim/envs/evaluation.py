@@ -1,11 +1,13 @@
 """Running policies over seeded episodes and the navigation metrics of audio-goal navigation
 (SoundSpaces, Chen et al. 2020; SPL from Anderson et al. 2018).
 
-Per episode: ``success`` (every victim found before the time limit), ``spl`` =
-``success * l / max(p, l)`` with ``l`` the shortest path from the start through every victim's
-goal region (``GeodesicMap.shortest_tour``) and ``p`` the path the robot centre actually took
-(ground truth, sampled every 0.1 s), episode length in steps and simulated seconds, steps with
-the bumper pressed (collisions), the fraction of victims found and the return.
+Per episode: ``success`` (every victim found before the time limit), ``spl`` by ``ssl_sim.scoring`` (the
+metric of results.json and the sweep: per victim, found x l / max(p, l) for the leg that ended at her find,
+``l`` the shortest path on the scoring graph from the leg's start to within 1.5 m of her, ``p`` the path the
+robot centre took, ground truth sampled every 0.1 s; mean over victims), ``shortest_path_m`` the shortest tour
+through every goal region from the start (``GeodesicMap.shortest_tour``, for reference), episode length in
+steps and simulated seconds, steps with the bumper pressed (collisions), the fraction of victims found and
+the return.
 """
 from __future__ import annotations
 
@@ -17,6 +19,8 @@ from typing import Callable, Iterable
 
 import gymnasium as gym
 import numpy as np
+
+from ssl_sim.scoring import FreeSpaceGraph, leg_spls, run_spl
 
 
 @dataclass(frozen=True)
@@ -50,9 +54,17 @@ def run_episode(env: gym.Env, policy, seed: int, name: str = "policy") -> Episod
             break
     success = info["victims_found"] == info["n_victims"] and not info.get("tipped_over", False)
     path = float(info["path_length_m"])
-    spl = float(success) * shortest / max(path, shortest) if shortest > 0 else float(success)
+    u = env.unwrapped
+    spl = episode_spl(u.scoring_graph, u.world, info["finds"]) if not info.get("tipped_over", False) else 0.0
     return EpisodeResult(name, int(seed), bool(success), int(info["victims_found"]), int(info["n_victims"]), steps,
                          float(info["time_s"]), path, shortest, spl, int(info["collisions"]), ret, str(info["scene"]))
+
+
+def episode_spl(graph: FreeSpaceGraph, world, finds) -> float:
+    """An episode's SPL by ``ssl_sim.scoring`` from ``info["finds"]`` (victim, base xy, path so far, time)."""
+    legs = leg_spls(graph, [v.position[:2] for v in world.victims], world.robot_start[:2],
+                    [(k, xy, path) for k, xy, path, _ in finds])
+    return run_spl(len(world.victims), legs)
 
 
 def evaluate(make_env: Callable[[], gym.Env], policies: dict[str, Callable[[gym.Env], object]],

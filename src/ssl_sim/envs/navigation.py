@@ -1,13 +1,10 @@
-"""Geodesic distances for navigation metrics and reward shaping: shortest paths of the robot
-centre around the obstacles of a :class:`~ssl_sim.world.World`.
+"""Geodesic distances for reward shaping: shortest paths of the robot centre around the obstacles of a
+:class:`~ssl_sim.world.World`, on the one free-space graph of ``ssl_sim.scoring`` (the graph every score uses:
+obstacles grown by the bumper radius, 16-connected, no corner cutting; within 2.7 % of the Euclidean shortest
+path, 8-connected: 8.2 %).
 
-The robot centre moves on the free-space grid of ``scene_gen.free_space_grid`` (obstacles that
-block the robot and the room walls grown by the bumper radius). Distances are shortest paths on
-that grid with 16-connected moves (axis, diagonal and knight moves, no corner cutting), which
-overestimate the true Euclidean shortest path by at most 2.7 % (8-connected: 8.2 %).
-
-A victim's *goal region* is the free cells within ``goal_radius`` (horizontal, m) of its mouth,
-the region where the environment declares it found. World frame, metres.
+A victim's *goal region* is the free cells within ``goal_radius`` (horizontal, m) of its mouth, the region where
+the environment declares it found. World frame, metres.
 """
 from __future__ import annotations
 
@@ -15,63 +12,38 @@ import itertools
 
 import numpy as np
 from scipy import ndimage
-from scipy.sparse import coo_matrix
-from scipy.sparse.csgraph import dijkstra
 
-from ssl_sim.physics.scene_gen import ROBOT_RADIUS, free_space_grid
+from ssl_sim.physics.scene_gen import ROBOT_RADIUS
+from ssl_sim.scoring import FreeSpaceGraph
 from ssl_sim.world import World
-
-# (di, dj) moves and the cells each one passes over (all must be free: no corner cutting).
-_MOVES: tuple[tuple[tuple[int, int], tuple[tuple[int, int], ...]], ...] = (
-    ((1, 0), ()), ((0, 1), ()),
-    ((1, 1), ((1, 0), (0, 1))), ((1, -1), ((1, 0), (0, -1))),
-    ((2, 1), ((1, 0), (1, 1))), ((1, 2), ((0, 1), (1, 1))),
-    ((2, -1), ((1, 0), (1, -1))), ((1, -2), ((0, -1), (1, -1))),
-)
 
 
 class GeodesicMap:
     """Shortest-path distances (m) from any point of the room to each victim's goal region.
 
     ``goal_radius``: horizontal distance (m) from a victim's mouth that counts as reaching it;
-    ``res``: grid cell (m); ``inflate``: robot radius (m) by which obstacles are grown."""
+    ``res``: grid cell (m); ``inflate``: robot radius (m) by which obstacles are grown. ``graph``: the
+    ``scoring.FreeSpaceGraph`` of ``world`` if already built."""
 
-    def __init__(self, world: World, goal_radius: float, res: float = 0.05, inflate: float = ROBOT_RADIUS) -> None:
+    def __init__(self, world: World, goal_radius: float, res: float = 0.05, inflate: float = ROBOT_RADIUS,
+                 graph: FreeSpaceGraph | None = None) -> None:
         if not goal_radius > 0:
             raise ValueError(f"goal_radius: expected > 0 m, got {goal_radius}")
         if not res > 0:
             raise ValueError(f"res: expected > 0 m, got {res}")
-        self.world, self.goal_radius, self.res = world, float(goal_radius), float(res)
-        free, centres = free_space_grid(world, inflate=inflate, res=res)
-        self.free, self.centres = free, centres
-        index = -np.ones(free.shape, np.int64)
-        index[free] = np.arange(int(free.sum()))
-        rows, cols, w = [], [], []
-        for (di, dj), via in _MOVES:
-            ok = _shifted(free, di, dj) & free
-            for vi, vj in via:
-                ok &= _shifted(free, vi, vj)
-            i, j = np.nonzero(ok)
-            rows.append(index[i, j])
-            cols.append(index[i + di, j + dj])
-            w.append(np.full(i.size, res * np.hypot(di, dj)))
-        n = int(free.sum())
-        self._graph = coo_matrix((np.concatenate(w), (np.concatenate(rows), np.concatenate(cols))),
-                                 shape=(n, n)).tocsr()
-        self._index = index
+        self.world, self.goal_radius = world, float(goal_radius)
+        self.graph = graph if graph is not None else FreeSpaceGraph(world, inflate=inflate, res=res)
+        self.res = self.graph.res
+        self.free, self.centres = self.graph.free, self.graph.centres
         # For points off the free grid (robot touching an obstacle): the nearest free cell.
-        _, self._nearest = ndimage.distance_transform_edt(~free, return_indices=True)
+        _, self._nearest = ndimage.distance_transform_edt(~self.free, return_indices=True)
         self.fields = [self._field(np.asarray(v.position[:2], float)) for v in world.victims]
 
     def _field(self, goal_xy: np.ndarray) -> np.ndarray:
         """Distance (m) of every grid cell to the goal region of a victim at ``goal_xy`` (inf if cut off)."""
         out = np.full(self.free.shape, np.inf)
-        d = np.hypot(*(self.centres - goal_xy).transpose(2, 0, 1))
-        goal = self._index[self.free & (d <= self.goal_radius)]
-        if goal.size == 0:
-            return out
-        dist = dijkstra(self._graph, directed=False, indices=goal, min_only=True)
-        out[self.free] = dist
+        if self.graph.region(goal_xy, self.goal_radius).size:
+            out[self.free] = np.maximum(self.graph.field(goal_xy, self.goal_radius), 0.0)
         return out
 
     def _cell(self, xy) -> tuple[int, int, float]:
@@ -126,15 +98,3 @@ class GeodesicMap:
             total = first[order[0]] + sum(inter[a, b] for a, b in zip(order[:-1], order[1:]))
             best = min(best, total)
         return float(best)
-
-
-def _shifted(a: np.ndarray, di: int, dj: int) -> np.ndarray:
-    """``out[i, j] = a[i + di, j + dj]`` (False outside)."""
-    out = np.zeros_like(a)
-    nx, ny = a.shape
-    si = slice(max(0, -di), min(nx, nx - di))
-    sj = slice(max(0, -dj), min(ny, ny - dj))
-    ti = slice(max(0, di), min(nx, nx + di))
-    tj = slice(max(0, dj), min(ny, ny + dj))
-    out[si, sj] = a[ti, tj]
-    return out

@@ -36,7 +36,9 @@ axes, azimuth CCW from forward, elevation up from horizontal):
 
 Reward (``RewardConfig``): shortest-path progress toward the nearest victim not yet found
 (``navigation.GeodesicMap``, 1 per m), +10 per victim found (robot centre within
-``found_radius_m`` [0.75 m] horizontally of the mouth at the end of a step), -0.2 per step with
+``found_radius_m`` [0.75 m] horizontally of the mouth at the end of a step: the action has no report, so the
+environment declares her at her true position, a find by ``ssl_sim.scoring``'s rules as long as
+``found_radius_m`` <= 1.5 m; ``info["finds"]`` lists them for the SPL), -0.2 per step with
 the bumper pressed, -0.01 per step, -10 if the robot tips over (tilt > ``tip_limit_deg``).
 Terminated when every victim is found, the robot tips over or the physics fails; truncation
 is left to ``gymnasium.wrappers.TimeLimit`` (``max_episode_steps`` of the registration).
@@ -217,7 +219,7 @@ class SSLRescueEnv(gym.Env):
                 ac = sc.acoustic_config(seed=acoustic_seed)
                 order = min(ac.ism_order, FIDELITY_ACOUSTICS[cfg.fidelity]["ism_order"])
                 ac = replace(ac, ism_order=order, noise_loop_s=FIDELITY_ACOUSTICS[cfg.fidelity].get("noise_loop_s"))
-                found_radius = sc.success_radius_m
+                found_radius = cfg.found_radius_m
                 ego = sc.ego_noise
             else:
                 if cfg.scene is not None:
@@ -275,6 +277,7 @@ class SSLRescueEnv(gym.Env):
         self._odo = Odometry(ep.robot.params)
         self._odo.update(ep.robot.wheel_odometry())
         self._found = np.zeros(ep.n_victims, bool)
+        self._finds: list[tuple[int, tuple[float, float], float, float]] = []
         self._time_offset = 0.0
         self._path = 0.0
         self._steps = 0
@@ -476,6 +479,8 @@ class SSLRescueEnv(gym.Env):
             if not self._found[k] and math.hypot(v.position[0] - self._xy[0], v.position[1] - self._xy[1]) \
                     <= ep.found_radius:
                 self._found[k] = True
+                self._finds.append((int(k), (float(self._xy[0]), float(self._xy[1])), float(self._path),
+                                    float(self.sim_time)))
                 newly += 1
                 self._mark_found(k)
         return newly
@@ -492,6 +497,7 @@ class SSLRescueEnv(gym.Env):
             "collided": bool(collided),
             "collisions": self._collisions,
             "path_length_m": self._path,
+            "finds": list(self._finds),   # (victim, base xy, path so far (m), time (s)) per find, in order
             "pose": np.array([p.x, p.y, p.yaw]),
             "episode_seed": self.episode_seed,
             "scene": ep.world.name,
@@ -603,6 +609,11 @@ class SSLRescueEnv(gym.Env):
     def world(self) -> World | None:
         """The current episode's World (None before the first reset)."""
         return None if self._ep is None else self._ep.world
+
+    @property
+    def scoring_graph(self):
+        """The current episode's ``scoring.FreeSpaceGraph`` (the graph every score uses; None before a reset)."""
+        return None if self._ep is None else self._ep.geodesic.graph
 
     @property
     def victims_found(self) -> np.ndarray:
