@@ -336,7 +336,8 @@ class RescueBehaviour:
         self.listener = Listener(audio, clock, localizer, mics, config.voice_threshold, speech, config.voice_scan_deg)
         self.map = SoundMap(dataclasses.replace(sound_map, array_height_m=config.array_height_m))
         self.grid = OccupancyGrid(occupancy, origin=np.asarray(start_pose, float)[:2])
-        self.coverage = ListeningCoverage(self.grid.origin, self.grid.n, self.grid.resolution, coverage)
+        self.coverage = ListeningCoverage(self.grid.origin, self.grid.n, self.grid.resolution, coverage,
+                                          memory_budget_mb=self.grid.coverage_store_mb)
         self.planner = Planner(planner)
         self.state = RescueState.LISTEN
         self.events: list[RescueEvent] = []
@@ -412,6 +413,7 @@ class RescueBehaviour:
             self.grid.mark_free(self.pose[:2])
             self._odo_started = True
         self.state = RescueState.LISTEN
+        self._keep_on_map()
         status = self.drive.status()
         if self._check_faults(status):
             return
@@ -423,6 +425,7 @@ class RescueBehaviour:
         heard = self._listen()
         if self._found_check(heard) or self.done:
             return
+        self._keep_on_map()
         src, plan, why = self.planner.choose_target(self.map.sources, self.grid, self.pose, self.clock.now(),
                                                     self.target, self.coverage.config.area)
         if src is not None and self.config.require_voice and src.cls is not SourceClass.VICTIM:
@@ -442,6 +445,11 @@ class RescueBehaviour:
                                           "elevation": el, "path_m": plan.length,
                                           "waypoints": plan.waypoints.tolist()})
         self._follow(plan, RescueState.APPROACH, Decision.DRIVE, src)
+
+    def _keep_on_map(self) -> None:
+        """Move the occupancy grid's and the coverage's window (together) when the robot nears its edge."""
+        if self.grid.follow(self.pose[:2]):
+            self.coverage.move_to(self.grid.offset)
 
     def _sensed(self, pose: np.ndarray, status: DriveStatus) -> None:
         """Range readings into the occupancy grid: one per ``SCAN_SPACING_M`` of travel or ``SCAN_TURN`` of turn,

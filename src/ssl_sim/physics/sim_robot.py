@@ -114,6 +114,8 @@ class SimRobot:
         self._sensor = {m.sensor(i).name: slice(m.sensor_adr[i], m.sensor_adr[i] + m.sensor_dim[i])
                         for i in range(m.nsensor)}
         self._stale = False
+        self._state = 0        # counts changes of the physical state (steps, placing, reset): reads cached on it
+        self._bumper_read: tuple[int, bool] | None = None
         self._requested = 0.0  # simulated time asked for through step(), s
         self._base_qpos = int(m.jnt_qposadr[m.joint("base_free").id])
         mujoco.mj_forward(self.model, self.data)
@@ -149,6 +151,7 @@ class SimRobot:
         mujoco.mj_resetData(self.model, self.data)
         mujoco.mj_forward(self.model, self.data)
         self._stale = False
+        self._state += 1
         self._requested = 0.0
         self._restart_yaw_log()
 
@@ -190,6 +193,7 @@ class SimRobot:
         self._requested = float(d.time)
         mujoco.mj_forward(m, d)
         self._stale = False
+        self._state += 1
         self._restart_yaw_log()
 
     # -- physics -----------------------------------------------------------------------------------
@@ -217,6 +221,7 @@ class SimRobot:
         self._log_yaw()
         # mj_step leaves positions, sensors and contacts one step behind the state; refresh on first read.
         self._stale = True
+        self._state += 1
         after = self.data.warning.number[_FATAL_INDEX]
         grew = {w.name: int(a - b) for w, a, b in zip(_FATAL_WARNINGS, after, before) if a > b}
         if grew or not np.all(np.isfinite(self.data.qpos)):
@@ -345,7 +350,16 @@ class SimRobot:
         """Whether the bumper switch is closed: the bumper band is within its travel
         (``robot_model.BUMPER_TRAVEL``) of a wall or big obstacle, or its touch sensor feels more than
         ``bumper_threshold`` N. Distance, not force alone: pressed against a wall the slipping wheels
-        make the contact chatter at sub-millimetre scale and the force flicker."""
+        make the contact chatter at sub-millimetre scale and the force flicker.
+
+        Read once per physical state (a control tick reads the drive's status two or three times)."""
+        if self._bumper_read is not None and self._bumper_read[0] == self._state:
+            return self._bumper_read[1]
+        pressed = self._bumper_now()
+        self._bumper_read = (self._state, pressed)
+        return pressed
+
+    def _bumper_now(self) -> bool:
         self._sync()
         if self.sensor("bumper")[0] > self.bumper_threshold:
             return True
