@@ -73,10 +73,11 @@ class ListeningCoverage:
         self._kernel /= self._kernel.sum()
 
     def _place(self, offset: tuple[int, int]) -> None:
-        self.offset = offset
+        self.offset = offset = (int(offset[0]), int(offset[1]))
         self.origin = self._anchor + np.asarray(offset, float) * self.resolution
         n = self.n
-        self._centres = self.origin + (np.indices((n, n)).transpose(1, 2, 0) + 0.5) * self.resolution  # world m
+        # world m; counted from the first window's corner as the occupancy grid's cells (the same wherever it stands)
+        self._centres = self._anchor + (np.indices((n, n)).transpose(1, 2, 0) + offset + 0.5) * self.resolution
         self.in_area = self._in_area(self._centres)   # cells inside the search area (all without one)
 
     def _in_area(self, c: np.ndarray) -> np.ndarray:

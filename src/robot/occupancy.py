@@ -192,13 +192,16 @@ def _mb(mb: float) -> str:
 
 
 class OccupancyGrid:
-    """See the module docstring. ``origin``: (x, y) of the first window's centre in the world frame (m);
+    """See the module docstring. ``origin``: (x, y) of the first window's centre in the world frame (m), or
+    ``corner``: its cell (0, 0)'s corner;
     ``self.origin`` is the world (x, y) of the current window's cell (0, 0) corner."""
 
-    def __init__(self, config: OccupancyConfig = OccupancyConfig(), origin=(0.0, 0.0)) -> None:
+    def __init__(self, config: OccupancyConfig = OccupancyConfig(), origin=(0.0, 0.0), corner=None) -> None:
         self.config = config
         self.n = int(math.ceil(config.size_m / config.resolution_m))
-        self._anchor = np.asarray(origin, float)[:2] - 0.5 * self.n * config.resolution_m  # first window's corner
+        # the first window's corner (``corner``: given instead of the centre, e.g. to share another grid's cells)
+        self._anchor = np.asarray(origin, float)[:2] - 0.5 * self.n * config.resolution_m if corner is None \
+            else np.asarray(corner, float)[:2].copy()
         self.offset = (0, 0)   # cells from the first window's corner to this one's
         self.origin = self._anchor.copy()  # corner of cell (0, 0)
         self.log_odds = np.zeros((self.n, self.n))          # touch: contacts, stalls, footprints
@@ -214,6 +217,11 @@ class OccupancyGrid:
                                  "visited": (np.int32, 0)}, beyond * 20 / 28, "occupancy")
 
     # -- the window -------------------------------------------------------------------------
+    @property
+    def anchor(self) -> np.ndarray:
+        """World (x, y) of the first window's cell (0, 0) corner, m: map cells are counted from it."""
+        return self._anchor.copy()
+
     def needs_move(self, xy) -> bool:
         """Is ``xy`` (world m) within ``edge_margin_m`` of the window's edge (or beyond it)?"""
         m = min(self.config.edge_margin_m, 0.25 * self.n * self.resolution)
@@ -261,11 +269,13 @@ class OccupancyGrid:
 
     def cell(self, xy) -> tuple[int, int]:
         """Cell index of a world point (may be outside the grid)."""
-        ij = np.floor((np.asarray(xy, float)[:2] - self.origin) / self.resolution).astype(int)
+        ij = np.floor((np.asarray(xy, float)[:2] - self._anchor) / self.resolution).astype(int) - self.offset
         return int(ij[0]), int(ij[1])
 
+    # Cells are counted from the first window's corner (``_anchor``) and shifted by the window's ``offset``, so a
+    # point falls in the same map cell, and a cell has the same centre, wherever the window stands.
     def centre(self, ij) -> np.ndarray:
-        return self.origin + (np.asarray(ij, float) + 0.5) * self.resolution
+        return self._anchor + (np.asarray(ij, float) + self.offset + 0.5) * self.resolution
 
     def inside(self, ij) -> bool:
         return 0 <= ij[0] < self.n and 0 <= ij[1] < self.n
@@ -274,7 +284,7 @@ class OccupancyGrid:
         r = int(math.ceil(radius / self.resolution)) + 1
         ci, cj = self.cell(xy)
         ii, jj = np.meshgrid(np.arange(ci - r, ci + r + 1), np.arange(cj - r, cj + r + 1), indexing="ij")
-        c = self.origin + (np.stack([ii, jj], -1) + 0.5) * self.resolution
+        c = self._anchor + (np.stack([ii, jj], -1) + self.offset + 0.5) * self.resolution
         ok = np.hypot(c[..., 0] - xy[0], c[..., 1] - xy[1]) <= radius
         ok &= (ii >= 0) & (ii < self.n) & (jj >= 0) & (jj < self.n)
         return ii[ok], jj[ok]
@@ -327,7 +337,8 @@ class OccupancyGrid:
             return
         n = int(math.ceil(float(np.max(np.linalg.norm(ends - starts, axis=1))) / (0.5 * self.resolution))) + 1
         t = np.linspace(0.0, 1.0, n + 1)[None, :, None]
-        ij = np.floor((starts[:, None] + t * (ends - starts)[:, None] - self.origin) / self.resolution).astype(int)
+        ij = np.floor((starts[:, None] + t * (ends - starts)[:, None] - self._anchor) / self.resolution).astype(int) \
+            - self.offset
         end_ij = ij[:, -1]
         ok = ((ij >= 0) & (ij < self.n)).all(axis=-1)
         # a ray's own end cell is not crossed when it saw a surface there
