@@ -29,6 +29,7 @@ from collections import defaultdict  # noqa: E402
 import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
 
+from _results import load_avg, write_result  # noqa: E402
 from ssl_sim.envs import EnvConfig, SSLRescueEnv  # noqa: E402
 from ssl_sim.envs.fidelity import compare_fidelities, fidelity_summary  # noqa: E402
 
@@ -155,6 +156,7 @@ def main() -> None:
               f"{b.get('physics', 0):.1f} | {b.get('acoustics', 0):.1f} | {b.get('localization', 0):.1f} | "
               f"{b['other']:.1f} | {r['reset_new_scene_s']:.2f} |")
     print(f"| fast, AsyncVectorEnv x{vec['workers']} | {vec['env_steps_per_s']:.1f} (sum, wall) | | | | | | |")
+    print(f"(load average {load_avg()[0]:.2f} after the speed runs)")
     print()
     print(f"Drive, kinematic (fast) vs dynamic (full), one step from rest with the same random action "
           f"({drive['steps']} steps; full drove {drive['full_moved_median_m']:.3f} m median): position differs "
@@ -170,6 +172,12 @@ def main() -> None:
             "fidelity": {k: (round(v, 3) if isinstance(v, float) else v) for k, v in fid.items()},
             "loadavg_1min": os.getloadavg()[0], "cpus": os.cpu_count(), "quick": args.quick}
     print(json.dumps(line))
+    write_result("env", {"fast_steps_per_cpu_s": round(fast["steps_per_s"], 1),
+                         "fast_ms_per_step_cpu": round(fast["ms_per_step"], 2),
+                         **{f"fast_{k}_ms_cpu": v for k, v in fast["ms_breakdown"].items()},
+                         "full_steps_per_cpu_s": round(full["steps_per_s"], 1),
+                         "vector2_env_steps_per_wall_s": round(vec["env_steps_per_s"], 1),
+                         "quick": int(args.quick)})
 
 
 if __name__ == "__main__":

@@ -28,6 +28,7 @@ import platform  # noqa: E402
 import time  # noqa: E402
 import warnings  # noqa: E402
 
+from _results import load_avg, write_result  # noqa: E402
 from ssl_sim.runner import RescueRun  # noqa: E402
 from ssl_sim.scenario import load_scenario  # noqa: E402
 
@@ -120,7 +121,7 @@ def main(argv: list[str] | None = None) -> int:
         w = r["wall_clock_s"]
         rows.append({"seed": seed, "sim_s": r["sim_time_s"], "setup_s": round(setup, 3), "loop_s": w["loop"],
                      **{p: w[p] for p in PARTS}, "found": f"{r['n_found']}/{r['n_victims']}",
-                     "listens": r["n_listens"], "cpu_s": cpu})
+                     "listens": r["n_listens"], "cpu_s": cpu, "cpu_parts": w["cpu"]})
     sim = sum(r["sim_s"] for r in rows)
     loop = sum(r["loop_s"] for r in rows)
     per = {p: sum(r[p] for r in rows) / sim for p in PARTS}
@@ -136,12 +137,21 @@ def main(argv: list[str] | None = None) -> int:
     print(f"CPU s per simulated s (this process; the wall clock includes waiting for a shared CPU): "
           f"{cpu / sim:.3f} ({sim / cpu:.1f}x faster than real time); load average {os.getloadavg()[0]:.2f} "
           f"on {os.cpu_count()} cores")
+    cpu_per = {p: sum(r["cpu_parts"][p] for r in rows) / sim for p in PARTS}
+    cpu_loop = sum(r["cpu_parts"]["loop"] for r in rows)
+    print("CPU s per simulated s by part: " + ", ".join(f"{LABELS[p]} {cpu_per[p]:.4f} "
+                                                        f"({100 * cpu_per[p] * sim / cpu_loop:.0f} %)" for p in PARTS)
+          + f"; load average {load_avg()[0]:.2f}")
     print(json.dumps({"bench": "scenario", "scenario": sc.name, "seeds": [r["seed"] for r in rows],
                       "sim_s": round(sim, 2), "wall_per_sim_s": round(loop / sim, 4),
                       "realtime_factor": round(sim / loop, 2), "cpu_per_sim_s": round(cpu / sim, 4),
                       "cpu_realtime_factor": round(sim / cpu, 2), "loadavg_1min": os.getloadavg()[0],
                       "per_sim_s": {p: round(per[p], 4) for p in PARTS},
                       "found": [r["found"] for r in rows], "setup_s": [r["setup_s"] for r in rows]}))
+    write_result("scenario", {"loop_x_realtime_cpu": round(sim / cpu, 2), "cpu_s_per_sim_s": round(cpu / sim, 4),
+                              **{f"{LABELS[p]}_cpu_s_per_sim_s": round(cpu_per[p], 4) for p in PARTS},
+                              "behaviour_share_cpu": round(cpu_per["other"] * sim / cpu_loop, 3),
+                              "loop_x_realtime_wall": round(sim / loop, 2), "sim_s": round(sim, 2)})
     return 0
 
 
