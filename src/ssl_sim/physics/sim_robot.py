@@ -143,6 +143,11 @@ class SimRobot:
         return float(self.model.opt.timestep)
 
     @property
+    def state_version(self) -> int:
+        """Counts changes of the physical state (steps, placing, reset): equal values, equal state."""
+        return self._state
+
+    @property
     def time(self) -> float:
         """Simulated time (s) since the start or the last reset."""
         return float(self.data.time)
