@@ -167,6 +167,18 @@ def test_behaviour_reaches_a_caller_beyond_its_first_window():
     assert b.grid.offset != (0, 0) and b.coverage.offset == b.grid.offset
 
 
+def test_behaviour_ends_the_mission_when_the_map_reaches_its_budget():
+    """A budget that holds the 6 m window and less than one stored block: the mission ends as a fault naming the
+    budget once the window must move, the drive stopped; no exception."""
+    w = World([Source((2.5, 0.3, 0.1), 66.0), Source((5.0, -0.3, 0.1), 66.0)], seed=5)
+    window_mb = (6.0 / RES) ** 2 * 600 / 1e6
+    b = make(w, occupancy=OccupancyConfig(size_m=6.0, memory_budget_mb=window_mb + 0.05), speech=always_speech)
+    ev = b.run(max_time=120.0)
+    assert b.done and ev[-1].decision is Decision.FAULT
+    assert "memory budget" in ev[-1].reason and "memory_budget_mb" in ev[-1].reason
+    assert w.drive.commands[-1].twist == (0.0, 0.0, 0.0)
+
+
 def test_store_beyond_the_budget_names_the_figures():
     cfg = OccupancyConfig(size_m=4.0, memory_budget_mb=4.0 * 4.0 / RES ** 2 * 600 / 1e6 + 0.07)
     grid = OccupancyGrid(cfg, origin=(0.0, 0.0))

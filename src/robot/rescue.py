@@ -57,7 +57,7 @@ from robot.hal import AudioSource, Clock, DriveBase, DriveStatus
 from robot.kinematics import OmniDriveParams
 from robot.listening import ListenEvidence, Listener
 from robot.motion import Blocked, Motion, MotionConfig
-from robot.occupancy import OccupancyConfig, OccupancyGrid
+from robot.occupancy import MapMemoryError, OccupancyConfig, OccupancyGrid
 from robot.odometry import GyroFusionConfig, Odometry, TravelConfig, wrap_angle
 from robot.planner import Plan, Planner, PlannerConfig
 from robot.protocol import FAULT_NAMES
@@ -413,7 +413,8 @@ class RescueBehaviour:
             self.grid.mark_free(self.pose[:2])
             self._odo_started = True
         self.state = RescueState.LISTEN
-        self._keep_on_map()
+        if not self._keep_on_map():
+            return
         status = self.drive.status()
         if self._check_faults(status):
             return
@@ -425,7 +426,8 @@ class RescueBehaviour:
         heard = self._listen()
         if self._found_check(heard) or self.done:
             return
-        self._keep_on_map()
+        if not self._keep_on_map():
+            return
         src, plan, why = self.planner.choose_target(self.map.sources, self.grid, self.pose, self.clock.now(),
                                                     self.target, self.coverage.config.area)
         if src is not None and self.config.require_voice and src.cls is not SourceClass.VICTIM:
@@ -446,10 +448,16 @@ class RescueBehaviour:
                                           "waypoints": plan.waypoints.tolist()})
         self._follow(plan, RescueState.APPROACH, Decision.DRIVE, src)
 
-    def _keep_on_map(self) -> None:
-        """Move the occupancy grid's and the coverage's window (together) when the robot nears its edge."""
-        if self.grid.follow(self.pose[:2]):
-            self.coverage.move_to(self.grid.offset)
+    def _keep_on_map(self) -> bool:
+        """Move the occupancy grid's and the coverage's window (together) when the robot nears its edge; past the
+        map's memory budget the mission ends (``FAULT``, the reason names the budget): False then."""
+        try:
+            if self.grid.follow(self.pose[:2]):
+                self.coverage.move_to(self.grid.offset)
+        except MapMemoryError as exc:
+            self._finish(Decision.FAULT, f"the map reached its memory budget: {exc}")
+            return False
+        return True
 
     def _sensed(self, pose: np.ndarray, status: DriveStatus) -> None:
         """Range readings into the occupancy grid: one per ``SCAN_SPACING_M`` of travel or ``SCAN_TURN`` of turn,
