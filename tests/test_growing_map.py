@@ -7,6 +7,7 @@ import tracemalloc
 
 import numpy as np
 import pytest
+from scipy import sparse
 from scipy.sparse.csgraph import dijkstra
 
 from robot.coverage import CoverageConfig, ListeningCoverage
@@ -115,6 +116,35 @@ def test_kept_graph_and_search_equal_a_fresh_computation():
         plan = planner.plan(grid, start, goal)
         assert plan is None or np.isfinite(plan.length)
     assert rebuilt >= 1
+
+
+def test_grid_graph_is_the_sparse_matrix_of_its_edges():
+    """The directly built CSR graph equals, array for array, the matrix scipy makes of the edges listed one by
+    one (every free cell to each free king or knight neighbour after it), so a search on it is the same."""
+    rng = np.random.default_rng(3)
+    for trial in range(6):
+        free = rng.random((23, 31)) > rng.uniform(0.0, 0.6)
+        idx = -np.ones(free.shape, int)
+        idx[free] = np.arange(free.sum())
+        rows, cols, w = [], [], []
+        for i, j in zip(*np.nonzero(free)):
+            for di, dj in ((1, 0), (0, 1), (1, 1), (1, -1), (2, 1), (1, 2), (2, -1), (1, -2)):
+                a, b = i + di, j + dj
+                if 0 <= a < free.shape[0] and 0 <= b < free.shape[1] and free[a, b]:
+                    rows.append(idx[i, j])
+                    cols.append(idx[a, b])
+                    w.append(RES * math.hypot(di, dj))
+        n = int(free.sum())
+        want = sparse.coo_matrix((w, (rows, cols)), shape=(n, n)).tocsr()
+        got, got_idx = grid_graph(free, RES)
+        np.testing.assert_array_equal(got_idx, idx)
+        for name in ("indptr", "indices", "data"):
+            np.testing.assert_array_equal(getattr(got, name), getattr(want, name))
+            assert getattr(got, name).dtype == getattr(want, name).dtype
+        d1, p1 = dijkstra(got, directed=False, indices=0, return_predecessors=True)
+        d2, p2 = dijkstra(want, directed=False, indices=0, return_predecessors=True)
+        np.testing.assert_array_equal(d1, d2)
+        np.testing.assert_array_equal(p1, p2)
 
 
 def test_drive_30_m_from_the_start_with_flat_memory():

@@ -42,6 +42,8 @@ __all__ = ["PlannerConfig", "Planner", "Plan", "grid_graph"]
 #: Neighbour offsets for a 16-connected grid (king + knight moves): path lengths within ~3 % of the
 #: Euclidean geodesic instead of ~8 % with 8 neighbours.
 OFFSETS_16 = ((1, 0), (0, 1), (1, 1), (1, -1), (2, 1), (1, 2), (2, -1), (1, -2))
+#: The same offsets in the row-major order of the cells they lead to (the node order of ``grid_graph``).
+_OFFSETS_IN_NODE_ORDER = tuple(sorted(OFFSETS_16))
 
 
 def _outside(xy, area) -> float:
@@ -55,21 +57,24 @@ def _outside(xy, area) -> float:
 
 def grid_graph(free: np.ndarray, res: float) -> tuple[sparse.csr_matrix, np.ndarray]:
     """Undirected graph of the ``free`` cells (16-connected, edge = centre distance in m):
-    ``(graph, index)`` where ``index[i, j]`` is the node of cell (i, j) or -1."""
+    ``(graph, index)`` where ``index[i, j]`` is the node of cell (i, j) or -1.
+
+    Nodes number the free cells in row-major order; each node's row holds its neighbours after it (the other
+    half of the edges is the transpose's), in node order: the canonical CSR matrix (sorted, no duplicates) that
+    ``coo_matrix(...).tocsr()`` of the same edges gives, built directly (half the time on a 200 x 200 grid)."""
     nx, ny = free.shape
-    idx = np.full(free.shape, -1, dtype=np.int64)
-    idx[free] = np.arange(int(free.sum()))
-    rows, cols, w = [], [], []
-    for di, dj in OFFSETS_16:
-        j0, j1 = max(0, -dj), ny - max(0, dj)
-        a = idx[0:nx - di, j0:j1]
-        b = idx[di:nx, j0 + dj:j1 + dj]
-        ok = (a >= 0) & (b >= 0)
-        rows.append(a[ok])
-        cols.append(b[ok])
-        w.append(np.full(int(ok.sum()), res * math.hypot(di, dj)))
     n = int(free.sum())
-    g = sparse.coo_matrix((np.concatenate(w), (np.concatenate(rows), np.concatenate(cols))), shape=(n, n)).tocsr()
+    idx = np.full(free.shape, -1, dtype=np.int64)
+    idx[free] = np.arange(n)
+    pad = np.full((nx + 2, ny + 4), -1, dtype=np.int64)   # room for offsets of up to 2 rows down, 2 columns across
+    pad[:nx, 2:ny + 2] = idx
+    nb = np.stack([pad[di:di + nx, 2 + dj:2 + dj + ny][free] for di, dj in _OFFSETS_IN_NODE_ORDER], axis=1)
+    ok = nb >= 0
+    itype = np.int32 if max(n, int(ok.sum())) < 2 ** 31 else np.int64
+    indptr = np.zeros(n + 1, dtype=itype)
+    np.cumsum(ok.sum(axis=1), out=indptr[1:])
+    w = np.broadcast_to(np.array([res * math.hypot(di, dj) for di, dj in _OFFSETS_IN_NODE_ORDER]), nb.shape)
+    g = sparse.csr_matrix((w[ok], nb[ok].astype(itype), indptr), shape=(n, n))
     return g, idx
 
 
