@@ -29,7 +29,7 @@ from collections import defaultdict  # noqa: E402
 import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
 
-from _results import add_check_option, finish, require_stored  # noqa: E402
+from _results import add_check_option, finish, load_avg, require_stored  # noqa: E402
 from ssl_sim.envs import EnvConfig, SSLRescueEnv  # noqa: E402
 from ssl_sim.envs.fidelity import compare_fidelities, fidelity_summary  # noqa: E402
 
@@ -158,6 +158,7 @@ def main() -> int:
               f"{b.get('physics', 0):.1f} | {b.get('acoustics', 0):.1f} | {b.get('localization', 0):.1f} | "
               f"{b['other']:.1f} | {r['reset_new_scene_s']:.2f} |")
     print(f"| fast, AsyncVectorEnv x{vec['workers']} | {vec['env_steps_per_s']:.1f} (sum, wall) | | | | | | |")
+    print(f"(load average {load_avg()[0]:.2f} after the speed runs)")
     print()
     print(f"Drive, kinematic (fast) vs dynamic (full), one step from rest with the same random action "
           f"({drive['steps']} steps; full drove {drive['full_moved_median_m']:.3f} m median): position differs "

@@ -28,7 +28,7 @@ import platform  # noqa: E402
 import time  # noqa: E402
 import warnings  # noqa: E402
 
-from _results import add_check_option, finish, require_stored  # noqa: E402
+from _results import add_check_option, finish, load_avg, require_stored  # noqa: E402
 from ssl_sim.runner import RescueRun  # noqa: E402
 from ssl_sim.scenario import load_scenario  # noqa: E402
 
@@ -125,7 +125,7 @@ def main(argv: list[str] | None = None) -> int:
         w = r["wall_clock_s"]
         rows.append({"seed": seed, "sim_s": r["sim_time_s"], "setup_s": round(setup, 3), "loop_s": w["loop"],
                      **{p: w[p] for p in PARTS}, "found": f"{r['n_found']}/{r['n_victims']}",
-                     "listens": r["n_listens"], "cpu_s": cpu})
+                     "listens": r["n_listens"], "cpu_s": cpu, "cpu_parts": w["cpu"]})
     sim = sum(r["sim_s"] for r in rows)
     loop = sum(r["loop_s"] for r in rows)
     per = {p: sum(r[p] for r in rows) / sim for p in PARTS}
@@ -141,6 +141,11 @@ def main(argv: list[str] | None = None) -> int:
     print(f"CPU s per simulated s (this process; the wall clock includes waiting for a shared CPU): "
           f"{cpu / sim:.3f} ({sim / cpu:.1f}x faster than real time); load average {os.getloadavg()[0]:.2f} "
           f"on {os.cpu_count()} cores")
+    cpu_per = {p: sum(r["cpu_parts"][p] for r in rows) / sim for p in PARTS}
+    cpu_loop = sum(r["cpu_parts"]["loop"] for r in rows)
+    print("CPU s per simulated s by part: " + ", ".join(f"{LABELS[p]} {cpu_per[p]:.4f} "
+                                                        f"({100 * cpu_per[p] * sim / cpu_loop:.0f} %)" for p in PARTS)
+          + f"; load average {load_avg()[0]:.2f}")
     print(json.dumps({"bench": "scenario", "scenario": sc.name, "seeds": [r["seed"] for r in rows],
                       "sim_s": round(sim, 2), "wall_per_sim_s": round(loop / sim, 4),
                       "realtime_factor": round(sim / loop, 2), "cpu_per_sim_s": round(cpu / sim, 4),
@@ -149,6 +154,8 @@ def main(argv: list[str] | None = None) -> int:
                       "found": [r["found"] for r in rows], "setup_s": [r["setup_s"] for r in rows]}))
     figures = {"sim_s": round(sim, 2), "cpu_per_sim_s": round(cpu / sim, 4), "cpu_x_realtime": round(sim / cpu, 2),
                "wall_x_realtime": round(sim / loop, 2), **{f"{p}_wall_per_sim_s": round(per[p], 4) for p in PARTS},
+               **{f"{LABELS[p]}_cpu_s_per_sim_s": round(cpu_per[p], 4) for p in PARTS},
+               "behaviour_share_cpu": round(cpu_per["other"] * sim / cpu_loop, 3),
                "victims_found": sum(int(r["found"].split("/")[0]) for r in rows),
                "victims": sum(int(r["found"].split("/")[1]) for r in rows)}
     return finish("scenario", figures, check=args.check, better={"cpu_x_realtime": "higher"})

@@ -21,6 +21,7 @@ import numpy as np
 from scipy import signal
 
 from robot.config_values import need
+from robot.occupancy import BlockStore
 
 __all__ = ["CoverageConfig", "ListeningCoverage"]
 
@@ -54,23 +55,55 @@ class ListeningCoverage:
     """``unheard`` (n, n): probability that a caller in each cell is still undetected, on the grid of
     ``origin`` (world x, y of cell (0, 0)'s corner, m), ``n`` cells a side of ``resolution`` m."""
 
-    def __init__(self, origin, n: int, resolution: float, config: CoverageConfig = CoverageConfig()) -> None:
+    def __init__(self, origin, n: int, resolution: float, config: CoverageConfig = CoverageConfig(),
+                 memory_budget_mb: float = 64.0) -> None:
         self.config = config
-        self.origin = np.asarray(origin, float)[:2]
+        self._anchor = np.asarray(origin, float)[:2]
+        self.origin = self._anchor.copy()
+        self.offset = (0, 0)   # cells from the first window's corner (``move_to``: the occupancy grid's window)
         self.resolution = float(resolution)
         self.n = int(n)
-        self.unheard = np.ones((n, n))
-        self._centres = self.origin + (np.indices((n, n)).transpose(1, 2, 0) + 0.5) * self.resolution  # world m
-        self.in_area = np.ones((n, n), bool)   # cells inside the search area (all without one)
-        if config.area is not None:
-            c = self._centres
-            x0, y0, x1, y1 = config.area
-            self.in_area = (c[..., 0] >= x0) & (c[..., 0] <= x1) & (c[..., 1] >= y0) & (c[..., 1] <= y1)
-            self.unheard[~self.in_area] = 0.0   # nothing to find there
+        self._place((0, 0))
+        self.unheard = self._fresh(self._centres)
+        # The map beyond the window (as robot.occupancy's): floor never listened to is unheard in the area.
+        self.store = BlockStore({"unheard": (np.float64, self._fresh_cells)}, memory_budget_mb * 1e6, "coverage")
         r = int(math.ceil(config.hearing_radius_m / resolution))
         ii, jj = np.mgrid[-r:r + 1, -r:r + 1]
         self._kernel = (np.hypot(ii, jj) * resolution <= config.hearing_radius_m).astype(float)
         self._kernel /= self._kernel.sum()
+
+    def _place(self, offset: tuple[int, int]) -> None:
+        self.offset = offset = (int(offset[0]), int(offset[1]))
+        self.origin = self._anchor + np.asarray(offset, float) * self.resolution
+        n = self.n
+        # world m; counted from the first window's corner as the occupancy grid's cells (the same wherever it stands)
+        self._centres = self._anchor + (np.indices((n, n)).transpose(1, 2, 0) + offset + 0.5) * self.resolution
+        self.in_area = self._in_area(self._centres)   # cells inside the search area (all without one)
+
+    def _in_area(self, c: np.ndarray) -> np.ndarray:
+        if self.config.area is None:
+            return np.ones(c.shape[:-1], bool)
+        x0, y0, x1, y1 = self.config.area
+        return (c[..., 0] >= x0) & (c[..., 0] <= x1) & (c[..., 1] >= y0) & (c[..., 1] <= y1)
+
+    def _fresh(self, centres: np.ndarray) -> np.ndarray:
+        """Unheard probability of cells never listened to: 1 in the search area, 0 outside (nothing to find)."""
+        out = np.ones(centres.shape[:-1])
+        out[~self._in_area(centres)] = 0.0
+        return out
+
+    def _fresh_cells(self, i: np.ndarray, j: np.ndarray) -> np.ndarray:
+        return self._fresh(self._anchor + (np.stack([i, j], -1) + 0.5) * self.resolution)
+
+    def move_to(self, offset: tuple[int, int]) -> None:
+        """Put the window's cell (0, 0) at ``offset`` cells from the first window's (the occupancy grid's
+        ``offset`` after it moved): the cells left are stored, those entered come back from the store."""
+        offset = (int(offset[0]), int(offset[1]))
+        if offset == self.offset:
+            return
+        self.store.save(self.offset, {"unheard": self.unheard})
+        self.unheard = self.store.load(offset, (self.n, self.n))["unheard"]
+        self._place(offset)
 
     def detect_probability(self, xy, machines: Sequence[np.ndarray] = ()) -> float:
         """Detection probability per listen, at ``xy`` (world m), of a caller within the hearing radius."""
@@ -104,7 +137,8 @@ class ListeningCoverage:
         times that listen's detection probability relative to an unmasked one (0..1; 1 = all unheard, no
         machine near)."""
         cfg = self.config
-        # Beyond the grid's edge (10 m from the start) counts as heard: no goal is near it.
+        # Beyond the window's edge (at least occupancy.edge_margin_m from the robot) counts as heard: no goal is
+        # near it.
         g = signal.fftconvolve(self.unheard, self._kernel, mode="same")
         if machines:
             c = self._centres

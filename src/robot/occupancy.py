@@ -20,6 +20,13 @@ pose by default), at ``resolution_m``; cells hold log-odds of "an obstacle (for 
   obstacle when either layer says so.
 
 ``blocked`` is the configuration space for the robot centre: occupied cells grown by ``robot_radius_m``.
+
+**A map that grows**: the arrays are a ``size_m`` square *window* of an unbounded map. When the robot comes within
+``edge_margin_m`` of the window's edge, ``follow`` moves the window to centre it again: the cells it leaves go to
+a store of ``STORE_BLOCK`` x ``STORE_BLOCK`` cell blocks (only blocks holding anything learned), the cells it
+enters come back from the store (unknown where never seen). Everything that reads the grid (planner, coverage)
+works on the window, so the CPU per cycle does not grow with the map; the store grows with the floor the
+window has passed over and is bounded by ``memory_budget_mb`` (``MapMemoryError`` names the figures when reached).
 """
 from __future__ import annotations
 
@@ -31,7 +38,100 @@ from scipy import ndimage
 
 from robot.config_values import need
 
-__all__ = ["OccupancyConfig", "OccupancyGrid"]
+__all__ = ["OccupancyConfig", "OccupancyGrid", "MapMemoryError", "WINDOW_BYTES_PER_CELL", "STORE_BLOCK",
+           "BlockStore"]
+
+#: Working memory per cell of the window while the behaviour plans on it (bytes): the grid's layers, the
+#: listening coverage, the planner's graph (16 neighbours, sparse matrix build) and Dijkstra search, the frontier
+#: score fields. Measured with tracemalloc: a replan and an exploration goal on a 200 x 200 window peaked at 454
+#: bytes a cell above the 45 of the layers held; rounded up.
+WINDOW_BYTES_PER_CELL = 600
+#: Cells a side of a stored block of the map beyond the window.
+STORE_BLOCK = 64
+
+
+class MapMemoryError(RuntimeError):
+    """The map outgrew its configured memory budget (the message gives the figures and the field to raise)."""
+
+
+class BlockStore:
+    """Layers of a map beyond its window, in ``STORE_BLOCK``-cell square blocks keyed by block index (cells
+    counted from a fixed anchor), each block one array per layer; only blocks that differ from the layers'
+    defaults are kept. ``defaults``: name -> (dtype, default value per cell: a scalar, or a function of the
+    blocks' cell indices (i, j) arrays giving the value)."""
+
+    def __init__(self, defaults: dict, budget_bytes: float, what: str) -> None:
+        self.defaults = defaults
+        self.blocks: dict[tuple[int, int], dict[str, np.ndarray]] = {}
+        self.budget_bytes = float(budget_bytes)
+        self.what = what
+        self.block_bytes = STORE_BLOCK ** 2 * sum(np.dtype(t).itemsize for t, _ in defaults.values())
+
+    @property
+    def nbytes(self) -> int:
+        return len(self.blocks) * self.block_bytes
+
+    def _default(self, name: str, bi: int, bj: int) -> np.ndarray:
+        dtype, value = self.defaults[name]
+        if callable(value):
+            i, j = np.meshgrid(np.arange(STORE_BLOCK) + bi * STORE_BLOCK, np.arange(STORE_BLOCK) + bj * STORE_BLOCK,
+                               indexing="ij")
+            return np.asarray(value(i, j), dtype)
+        return np.full((STORE_BLOCK, STORE_BLOCK), value, dtype)
+
+    def _spans(self, i0: int, n: int) -> list[tuple[int, int, int]]:
+        """(block index, first cell in it, last cell + 1) of the cells i0 .. i0 + n - 1."""
+        out = []
+        b = i0 // STORE_BLOCK
+        while b * STORE_BLOCK < i0 + n:
+            a, e = max(i0, b * STORE_BLOCK), min(i0 + n, (b + 1) * STORE_BLOCK)
+            out.append((b, a, e))
+            b += 1
+        return out
+
+    def save(self, offset: tuple[int, int], layers: dict[str, np.ndarray]) -> None:
+        """Keep ``layers`` (each (n, n), cell (0, 0) at cell ``offset`` from the anchor)."""
+        oi, oj = offset
+        n_i, n_j = next(iter(layers.values())).shape
+        for bi, a, e in self._spans(oi, n_i):
+            for bj, c, f in self._spans(oj, n_j):
+                blk = self.blocks.get((bi, bj))
+                new = blk is None
+                if new:
+                    blk = {k: self._default(k, bi, bj) for k in self.defaults}
+                for k, arr in layers.items():
+                    blk[k][a - bi * STORE_BLOCK:e - bi * STORE_BLOCK, c - bj * STORE_BLOCK:f - bj * STORE_BLOCK] = \
+                        arr[a - oi:e - oi, c - oj:f - oj]
+                if new:
+                    if all(np.array_equal(blk[k], self._default(k, bi, bj)) for k in self.defaults):
+                        continue   # nothing learned there
+                    if self.nbytes + self.block_bytes > self.budget_bytes:
+                        raise MapMemoryError(
+                            f"{self.what}: the map beyond the window would grow past {len(self.blocks) + 1} blocks "
+                            f"of {STORE_BLOCK} x {STORE_BLOCK} cells ({(self.nbytes + self.block_bytes) / 1e6:.1f} MB "
+                            f"stored) over its memory budget ({self.budget_bytes / 1e6:.1f} MB); raise "
+                            "memory_budget_mb or use a coarser resolution_m")
+                    self.blocks[(bi, bj)] = blk
+
+    def load(self, offset: tuple[int, int], shape: tuple[int, int]) -> dict[str, np.ndarray]:
+        """The layers of the window of ``shape`` cells at cell ``offset`` (defaults where nothing is stored)."""
+        oi, oj = offset
+        out = {}
+        for k, (dtype, value) in self.defaults.items():
+            if callable(value):
+                i, j = np.meshgrid(np.arange(shape[0]) + oi, np.arange(shape[1]) + oj, indexing="ij")
+                out[k] = np.asarray(value(i, j), dtype)
+            else:
+                out[k] = np.full(shape, value, dtype)
+        for bi, a, e in self._spans(oi, shape[0]):
+            for bj, c, f in self._spans(oj, shape[1]):
+                blk = self.blocks.get((bi, bj))
+                if blk is None:
+                    continue
+                for k in self.defaults:
+                    out[k][a - oi:e - oi, c - oj:f - oj] = \
+                        blk[k][a - bi * STORE_BLOCK:e - bi * STORE_BLOCK, c - bj * STORE_BLOCK:f - bj * STORE_BLOCK]
+        return out
 
 
 @dataclass(frozen=True)
@@ -54,10 +154,27 @@ class OccupancyConfig:
     #                                   is >= 0.075 m / sin(tilt) away, 0.35 m at a 12 deg tilt
     range_free_log_odds: float = -0.35  # per ray crossing a cell
     range_max_log_odds: float = 3.5   # clamp: ten crossings clear a confirmed return again (odometry drifts)
+    # The window moves (module docstring) when the robot is this close to its edge: the hearing radius (1.5 m)
+    # plus the robot's, so a listen's floor lies on the window (at most a quarter of size_m: a small window moves
+    # when the robot leaves its middle half). The shipped rooms (<= 7 m) never move the default window.
+    edge_margin_m: float = 2.0
+    memory_budget_mb: float = 256.0   # the window's working memory plus the stored map beyond it (100 x 100 m
+    #                                   at 0.1 m: 16 MB window + 20 MB of occupancy store)
 
     def __post_init__(self) -> None:
-        need(self, self.resolution_m > 0, "resolution_m", "> 0 m")
-        need(self, self.size_m >= 10 * self.resolution_m, "size_m", f">= 10 cells ({10 * self.resolution_m} m)")
+        need(self, self.resolution_m > 0 and math.isfinite(self.resolution_m), "resolution_m", "> 0 m")
+        need(self, math.isfinite(self.size_m) and self.size_m >= 10 * self.resolution_m, "size_m",
+             f">= 10 cells ({10 * self.resolution_m} m)")
+        need(self, self.memory_budget_mb > 0 and math.isfinite(self.memory_budget_mb), "memory_budget_mb", "> 0 MB")
+        need(self, 0 <= self.edge_margin_m < math.inf, "edge_margin_m", ">= 0 m")
+        cells = math.ceil(self.size_m / self.resolution_m) ** 2
+        need_mb = cells * WINDOW_BYTES_PER_CELL / 1e6
+        if need_mb > self.memory_budget_mb:
+            raise ValueError(
+                f"OccupancyConfig.resolution_m={self.resolution_m!r}, size_m={self.size_m!r}: the map window of "
+                f"{cells:.3g} cells needs about {_mb(need_mb)} to plan on ({WINDOW_BYTES_PER_CELL} bytes a cell), "
+                f"more than memory_budget_mb={self.memory_budget_mb:g}; use a coarser resolution_m or a smaller "
+                "size_m (the map grows beyond the window as the robot moves), or raise memory_budget_mb")
         need(self, self.robot_radius_m > 0, "robot_radius_m", "> 0 m")
         need(self, self.contact_width_m > 0, "contact_width_m", "> 0 m")
         need(self, self.hit_log_odds > 0, "hit_log_odds", "> 0")
@@ -70,18 +187,80 @@ class OccupancyConfig:
         need(self, self.range_max_log_odds >= self.occupied_log_odds, "range_max_log_odds", ">= occupied_log_odds")
 
 
-class OccupancyGrid:
-    """See the module docstring. ``origin``: (x, y) of the grid centre in the world frame (m)."""
+def _mb(mb: float) -> str:
+    return f"{mb / 1e6:.3g} TB" if mb >= 1e6 else f"{mb / 1e3:.3g} GB" if mb >= 1e3 else f"{mb:.3g} MB"
 
-    def __init__(self, config: OccupancyConfig = OccupancyConfig(), origin=(0.0, 0.0)) -> None:
+
+class OccupancyGrid:
+    """See the module docstring. ``origin``: (x, y) of the first window's centre in the world frame (m), or
+    ``corner``: its cell (0, 0)'s corner;
+    ``self.origin`` is the world (x, y) of the current window's cell (0, 0) corner."""
+
+    def __init__(self, config: OccupancyConfig = OccupancyConfig(), origin=(0.0, 0.0), corner=None) -> None:
         self.config = config
         self.n = int(math.ceil(config.size_m / config.resolution_m))
-        self.origin = np.asarray(origin, float)[:2] - 0.5 * self.n * config.resolution_m  # corner of cell (0, 0)
+        # the first window's corner (``corner``: given instead of the centre, e.g. to share another grid's cells)
+        self._anchor = np.asarray(origin, float)[:2] - 0.5 * self.n * config.resolution_m if corner is None \
+            else np.asarray(corner, float)[:2].copy()
+        self.offset = (0, 0)   # cells from the first window's corner to this one's
+        self.origin = self._anchor.copy()  # corner of cell (0, 0)
         self.log_odds = np.zeros((self.n, self.n))          # touch: contacts, stalls, footprints
         self.range_log_odds = np.zeros((self.n, self.n))    # range rays (and footprints)
         self.visited = np.zeros((self.n, self.n), dtype=np.int32)
         self.contacts: list[tuple[float, float, str]] = []   # (x, y, why): where contacts were marked
         self._blocked: np.ndarray | None = None
+        # The budget left after the window is shared with the listening coverage's store by bytes per cell: 20
+        # here (two float64 layers and an int32), 8 there (one float64).
+        beyond = config.memory_budget_mb * 1e6 - self.n ** 2 * WINDOW_BYTES_PER_CELL
+        self.coverage_store_mb = beyond * 8 / 28 / 1e6
+        self.store = BlockStore({"log_odds": (np.float64, 0.0), "range_log_odds": (np.float64, 0.0),
+                                 "visited": (np.int32, 0)}, beyond * 20 / 28, "occupancy")
+
+    # -- the window -------------------------------------------------------------------------
+    @property
+    def anchor(self) -> np.ndarray:
+        """World (x, y) of the first window's cell (0, 0) corner, m: map cells are counted from it."""
+        return self._anchor.copy()
+
+    def needs_move(self, xy) -> bool:
+        """Is ``xy`` (world m) within ``edge_margin_m`` of the window's edge (or beyond it)?"""
+        m = min(self.config.edge_margin_m, 0.25 * self.n * self.resolution)
+        lo = self.origin + m
+        hi = self.origin + self.n * self.resolution - m
+        p = np.asarray(xy, float)[:2]
+        return bool(np.any(p < lo) or np.any(p > hi))
+
+    def window_offset_for(self, xy) -> tuple[int, int]:
+        """The window offset (cells from the first window) that centres the window on ``xy``."""
+        c = np.floor((np.asarray(xy, float)[:2] - self._anchor) / self.resolution).astype(int) - self.n // 2
+        return int(c[0]), int(c[1])
+
+    def follow(self, xy) -> bool:
+        """Move the window to centre it on ``xy`` (world m) if ``xy`` is within ``edge_margin_m`` of its edge;
+        returns whether it moved. Raises ``MapMemoryError`` when the store would pass the memory budget."""
+        if not self.needs_move(xy):
+            return False
+        self.move_to(self.window_offset_for(xy))
+        return True
+
+    def move_to(self, offset: tuple[int, int]) -> None:
+        """Put the window's cell (0, 0) at ``offset`` cells from the first window's."""
+        offset = (int(offset[0]), int(offset[1]))
+        if offset == self.offset:
+            return
+        self.store.save(self.offset, {"log_odds": self.log_odds, "range_log_odds": self.range_log_odds,
+                                      "visited": self.visited})
+        layers = self.store.load(offset, (self.n, self.n))
+        self.log_odds, self.range_log_odds, self.visited = layers["log_odds"], layers["range_log_odds"], \
+            layers["visited"]
+        self.offset = offset
+        self.origin = self._anchor + np.asarray(offset, float) * self.resolution
+        self._blocked = None
+
+    @property
+    def memory_bytes(self) -> int:
+        """The window's working memory (``WINDOW_BYTES_PER_CELL`` a cell) plus the store's blocks."""
+        return self.n ** 2 * WINDOW_BYTES_PER_CELL + self.store.nbytes
 
     # -- coordinates ----------------------------------------------------------------------
     @property
@@ -90,11 +269,13 @@ class OccupancyGrid:
 
     def cell(self, xy) -> tuple[int, int]:
         """Cell index of a world point (may be outside the grid)."""
-        ij = np.floor((np.asarray(xy, float)[:2] - self.origin) / self.resolution).astype(int)
+        ij = np.floor((np.asarray(xy, float)[:2] - self._anchor) / self.resolution).astype(int) - self.offset
         return int(ij[0]), int(ij[1])
 
+    # Cells are counted from the first window's corner (``_anchor``) and shifted by the window's ``offset``, so a
+    # point falls in the same map cell, and a cell has the same centre, wherever the window stands.
     def centre(self, ij) -> np.ndarray:
-        return self.origin + (np.asarray(ij, float) + 0.5) * self.resolution
+        return self._anchor + (np.asarray(ij, float) + self.offset + 0.5) * self.resolution
 
     def inside(self, ij) -> bool:
         return 0 <= ij[0] < self.n and 0 <= ij[1] < self.n
@@ -103,7 +284,7 @@ class OccupancyGrid:
         r = int(math.ceil(radius / self.resolution)) + 1
         ci, cj = self.cell(xy)
         ii, jj = np.meshgrid(np.arange(ci - r, ci + r + 1), np.arange(cj - r, cj + r + 1), indexing="ij")
-        c = self.origin + (np.stack([ii, jj], -1) + 0.5) * self.resolution
+        c = self._anchor + (np.stack([ii, jj], -1) + self.offset + 0.5) * self.resolution
         ok = np.hypot(c[..., 0] - xy[0], c[..., 1] - xy[1]) <= radius
         ok &= (ii >= 0) & (ii < self.n) & (jj >= 0) & (jj < self.n)
         return ii[ok], jj[ok]
@@ -156,7 +337,8 @@ class OccupancyGrid:
             return
         n = int(math.ceil(float(np.max(np.linalg.norm(ends - starts, axis=1))) / (0.5 * self.resolution))) + 1
         t = np.linspace(0.0, 1.0, n + 1)[None, :, None]
-        ij = np.floor((starts[:, None] + t * (ends - starts)[:, None] - self.origin) / self.resolution).astype(int)
+        ij = np.floor((starts[:, None] + t * (ends - starts)[:, None] - self._anchor) / self.resolution).astype(int) \
+            - self.offset
         end_ij = ij[:, -1]
         ok = ((ij >= 0) & (ij < self.n)).all(axis=-1)
         # a ray's own end cell is not crossed when it saw a surface there

@@ -57,7 +57,7 @@ from robot.hal import AudioSource, Clock, DriveBase, DriveStatus, EndOfAudio
 from robot.kinematics import OmniDriveParams
 from robot.listening import ListenEvidence, Listener
 from robot.motion import Blocked, Motion, MotionConfig
-from robot.occupancy import OccupancyConfig, OccupancyGrid
+from robot.occupancy import MapMemoryError, OccupancyConfig, OccupancyGrid
 from robot.odometry import GyroFusionConfig, Odometry, TravelConfig, wrap_angle
 from robot.planner import Plan, Planner, PlannerConfig
 from robot.protocol import FAULT_NAMES
@@ -332,7 +332,8 @@ class RescueBehaviour:
             _ = self.listener.vad   # the model files checked now (robot.vad.ModelError), not at the first listen
         self.map = SoundMap(dataclasses.replace(sound_map, array_height_m=config.array_height_m))
         self.grid = OccupancyGrid(occupancy, origin=np.asarray(start_pose, float)[:2])
-        self.coverage = ListeningCoverage(self.grid.origin, self.grid.n, self.grid.resolution, coverage)
+        self.coverage = ListeningCoverage(self.grid.origin, self.grid.n, self.grid.resolution, coverage,
+                                          memory_budget_mb=self.grid.coverage_store_mb)
         self.planner = Planner(planner)
         self.state = RescueState.LISTEN
         self.events: list[RescueEvent] = []
@@ -408,6 +409,8 @@ class RescueBehaviour:
             self.grid.mark_free(self.pose[:2])
             self._odo_started = True
         self.state = RescueState.LISTEN
+        if not self._keep_on_map():
+            return
         status = self.drive.status()
         if self._check_faults(status):
             return
@@ -418,6 +421,8 @@ class RescueBehaviour:
         self.motion.stop()
         heard = self._listen()
         if self._found_check(heard) or self.done:
+            return
+        if not self._keep_on_map():
             return
         src, plan, why = self.planner.choose_target(self.map.sources, self.grid, self.pose, self.clock.now(),
                                                     self.target, self.coverage.config.area)
@@ -438,6 +443,17 @@ class RescueBehaviour:
                                           "elevation": el, "path_m": plan.length,
                                           "waypoints": plan.waypoints.tolist()})
         self._follow(plan, RescueState.APPROACH, Decision.DRIVE, src)
+
+    def _keep_on_map(self) -> bool:
+        """Move the occupancy grid's and the coverage's window (together) when the robot nears its edge; past the
+        map's memory budget the mission ends (``FAULT``, the reason names the budget): False then."""
+        try:
+            if self.grid.follow(self.pose[:2]):
+                self.coverage.move_to(self.grid.offset)
+        except MapMemoryError as exc:
+            self._finish(Decision.FAULT, f"the map reached its memory budget: {exc}")
+            return False
+        return True
 
     def _sensed(self, pose: np.ndarray, status: DriveStatus) -> None:
         """Range readings into the occupancy grid: one per ``SCAN_SPACING_M`` of travel or ``SCAN_TURN`` of turn,

@@ -249,7 +249,7 @@ class Localizer:
         # Fine points around each coarse point (a cap of 1.5 coarse spacings) for refinement,
         # and the largest lag change inside such a cap, which sets the max-pooling width.
         cap = 1.5 * coarse_sp
-        fine_tree = cKDTree(self.fine_grid.directions)
+        fine_tree = self._fine_tree = cKDTree(self.fine_grid.directions)  # also the pool's (locate_blocks)
         self._refine = [np.asarray(v, dtype=np.intp) for v in
                         fine_tree.query_ball_point(self.coarse_grid.directions, 2 * np.sin(cap / 2))]
         self._neighbours = neighbour_table(self.coarse_grid.directions, 1.3 * coarse_sp)
@@ -338,7 +338,7 @@ class Localizer:
         Works on its own state: the streaming state (:meth:`process`) is left alone.
         """
         cfg = self.config
-        pool = DirectionPool(self.fine_grid.directions)
+        pool = DirectionPool(self.fine_grid.directions, tree=self._fine_tree)
         gcc_sum, w_sum, w_sq, ms_sum, frames, t_end = 0.0, 0.0, 0.0, 0.0, 0, 0.0
         st = self._new_stream()
         st.wheel_speeds = self._check_speeds(wheel_speeds)

@@ -26,13 +26,20 @@ MEMBER_DEG = 8.0   # detections within this of a mode make it (2 kernel widths)
 
 
 class DirectionPool:
-    """Tallies per-window detections on a grid of unit vectors ``directions`` (n, 3), array frame."""
+    """Tallies per-window detections on a grid of unit vectors ``directions`` (n, 3), array frame.
 
-    def __init__(self, directions: np.ndarray, kernel_deg: float = KERNEL_DEG, member_deg: float = MEMBER_DEG):
+    ``tree``: a ``cKDTree`` of ``directions`` built before (a localizer pools every recording on the same grid;
+    building the tree of its 10^4 fine points took 4 ms, more than the rest of a short recording's pooling)."""
+
+    def __init__(self, directions: np.ndarray, kernel_deg: float = KERNEL_DEG, member_deg: float = MEMBER_DEG,
+                 tree: cKDTree | None = None):
         if not 0 < kernel_deg <= member_deg < 90:
             raise ValueError(f"kernel_deg={kernel_deg}, member_deg={member_deg}: expected 0 < kernel <= member < 90 deg")
         self.directions = np.asarray(directions, dtype=float)
-        self._tree = cKDTree(self.directions)
+        if tree is not None and (tree.n != len(self.directions) or tree.m != self.directions.shape[-1]):
+            raise ValueError(f"tree: holds {tree.n} points of dimension {tree.m}, expected the {self.directions.shape} "
+                             "directions")
+        self._tree = tree if tree is not None else cKDTree(self.directions)
         self._kappa = 1.0 / np.deg2rad(kernel_deg) ** 2
         self._member_cos = np.cos(np.deg2rad(member_deg))
         n = len(self.directions)

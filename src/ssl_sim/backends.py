@@ -71,6 +71,8 @@ class SimAudioSource(AudioSource):
         self.last_array_poses: list[tuple[np.ndarray, np.ndarray]] = []
         #: Wall-clock seconds spent in reads, split into stepping the physics and rendering the audio.
         self.timing = {"physics": 0.0, "acoustics": 0.0}
+        #: The same split in CPU seconds of this process (what a loaded machine does not inflate).
+        self.cpu = {"physics": 0.0, "acoustics": 0.0}
 
     @property
     def sample_rate(self) -> int:
@@ -89,7 +91,7 @@ class SimAudioSource(AudioSource):
         n0 = int(round(self.robot.time * fs))
         chunk = max(1, int(round(self.chunk_s * fs)))
         bounds = list(range(0, n, chunk)) + [n]
-        t_start = time.perf_counter()
+        t_start, c_start = time.perf_counter(), time.process_time()
         mics = [self.robot.mic_positions()]
         poses = [self.robot.array_pose()]
         speeds = [self.robot.wheel_odometry().wheel_speeds]
@@ -102,8 +104,9 @@ class SimAudioSource(AudioSource):
             if self.ego_noise is not None:
                 motors.append(self.robot.motor_positions())
         self.last_array_poses = poses
-        t_phys = time.perf_counter()
+        t_phys, c_phys = time.perf_counter(), time.process_time()
         self.timing["physics"] += t_phys - t_start
+        self.cpu["physics"] += c_phys - c_start
         traj = np.stack(mics)  # poses at the chunk boundaries (n_chunks + 1, n_mics, 3)
         ego = None
         if self.ego_noise is not None:
@@ -125,6 +128,7 @@ class SimAudioSource(AudioSource):
                                                       extra_pressure=None if ego is None else ego[:, a:b])
                                 for i, (a, b) in enumerate(zip(bounds[:-1], bounds[1:]))], axis=1)
         self.timing["acoustics"] += time.perf_counter() - t_phys
+        self.cpu["acoustics"] += time.process_time() - c_phys
         self.blocks_read += 1
         block = AudioBlock(x, fs, n0 / fs)
         if self.on_block is not None:

@@ -73,6 +73,7 @@ class SimDriveBase(DriveBase):
         self._ranges: tuple[float, tuple[float, ...]] | None = None
         self.stall_min_speed, self.stall_ratio, self.stall_time = stall_min_speed, stall_ratio, stall_time
         self._slow_since: float | None = None
+        self._status: tuple[tuple, DriveStatus] | None = None   # (what it depends on, the last status read)
         self.gyro_window = float(gyro_window)
         self.gyro_sigma = float(gyro_noise_density) / math.sqrt(2.0 * self.gyro_window)
         self.gyro_bias = float(gyro_bias)
@@ -95,7 +96,19 @@ class SimDriveBase(DriveBase):
         return self.robot.wheel_odometry()
 
     def status(self) -> DriveStatus:
+        # Read again at the same physical state, time, commands and bias (a control tick reads it two or three
+        # times), the status is the same: every part of it is a function of these (the noise draws happen only
+        # when the time moved on), so the reading is kept.
         cmd = self.robot.wheel_commands
+        key = (self.robot.state_version, self.robot.time, cmd.tobytes(), self.gyro_bias, self._slow_since)
+        if self._status is not None and self._status[0] == key:
+            return self._status[1]
+        st = self._read_status(cmd)
+        self._status = ((self.robot.state_version, self.robot.time, cmd.tobytes(), self.gyro_bias, self._slow_since),
+                        st)
+        return st
+
+    def _read_status(self, cmd: np.ndarray) -> DriveStatus:
         speed = self.robot.wheel_odometry().wheel_speeds
         driven = np.abs(cmd) >= self.stall_min_speed
         slow = bool(np.any(driven & (np.abs(speed) < self.stall_ratio * np.abs(cmd))))

@@ -107,6 +107,7 @@ class SimRobot:
         self._motors = np.array([m.geom(f"motor{i}_body").id for i in range(3)])
         self._robot_bodies = self._subtree(self._base)
         self._floor = m.geom(FLOOR_GEOM).id
+        self._robot_geom = np.isin(m.geom_bodyid, self._robot_bodies)   # per geom: part of the robot
         self._bumper = m.geom(rm.BUMPER_GEOM).id
         # Static geoms the bumper can meet: everything of the world's but the floor and small debris.
         self._bumper_targets = np.array([g for g in range(m.ngeom) if m.geom_bodyid[g] not in self._robot_bodies
@@ -114,6 +115,8 @@ class SimRobot:
         self._sensor = {m.sensor(i).name: slice(m.sensor_adr[i], m.sensor_adr[i] + m.sensor_dim[i])
                         for i in range(m.nsensor)}
         self._stale = False
+        self._state = 0        # counts changes of the physical state (steps, placing, reset): reads cached on it
+        self._bumper_read: tuple[int, bool] | None = None
         self._requested = 0.0  # simulated time asked for through step(), s
         self._base_qpos = int(m.jnt_qposadr[m.joint("base_free").id])
         mujoco.mj_forward(self.model, self.data)
@@ -140,6 +143,11 @@ class SimRobot:
         return float(self.model.opt.timestep)
 
     @property
+    def state_version(self) -> int:
+        """Counts changes of the physical state (steps, placing, reset): equal values, equal state."""
+        return self._state
+
+    @property
     def time(self) -> float:
         """Simulated time (s) since the start or the last reset."""
         return float(self.data.time)
@@ -149,6 +157,7 @@ class SimRobot:
         mujoco.mj_resetData(self.model, self.data)
         mujoco.mj_forward(self.model, self.data)
         self._stale = False
+        self._state += 1
         self._requested = 0.0
         self._restart_yaw_log()
 
@@ -190,6 +199,7 @@ class SimRobot:
         self._requested = float(d.time)
         mujoco.mj_forward(m, d)
         self._stale = False
+        self._state += 1
         self._restart_yaw_log()
 
     # -- physics -----------------------------------------------------------------------------------
@@ -217,6 +227,7 @@ class SimRobot:
         self._log_yaw()
         # mj_step leaves positions, sensors and contacts one step behind the state; refresh on first read.
         self._stale = True
+        self._state += 1
         after = self.data.warning.number[_FATAL_INDEX]
         grew = {w.name: int(a - b) for w, a, b in zip(_FATAL_WARNINGS, after, before) if a > b}
         if grew or not np.all(np.isfinite(self.data.qpos)):
@@ -345,7 +356,16 @@ class SimRobot:
         """Whether the bumper switch is closed: the bumper band is within its travel
         (``robot_model.BUMPER_TRAVEL``) of a wall or big obstacle, or its touch sensor feels more than
         ``bumper_threshold`` N. Distance, not force alone: pressed against a wall the slipping wheels
-        make the contact chatter at sub-millimetre scale and the force flicker."""
+        make the contact chatter at sub-millimetre scale and the force flicker.
+
+        Read once per physical state (a control tick reads the drive's status two or three times)."""
+        if self._bumper_read is not None and self._bumper_read[0] == self._state:
+            return self._bumper_read[1]
+        pressed = self._bumper_now()
+        self._bumper_read = (self._state, pressed)
+        return pressed
+
+    def _bumper_now(self) -> bool:
         self._sync()
         if self.sensor("bumper")[0] > self.bumper_threshold:
             return True
@@ -363,16 +383,17 @@ class SimRobot:
         m, d = self.model, self.data
         out = []
         f6 = np.zeros(6)
-        for k in range(d.ncon):
+        if not d.ncon:
+            return out
+        # Robot-vs-world contacts other than the floor, picked out for all contacts at once: most are the wheels'
+        # on the floor, read every control tick (one array test instead of a Python loop over them).
+        g1s, g2s = d.contact.geom1, d.contact.geom2
+        r1s, r2s = self._robot_geom[g1s], self._robot_geom[g2s]
+        other = np.where(r1s, g2s, g1s)
+        for k in np.flatnonzero((r1s != r2s) & (other != self._floor)).tolist():
             c = d.contact[k]
             g1, g2 = int(c.geom1), int(c.geom2)
-            r1 = m.geom_bodyid[g1] in self._robot_bodies
-            r2 = m.geom_bodyid[g2] in self._robot_bodies
-            if r1 == r2:
-                continue
-            rg, wg = (g1, g2) if r1 else (g2, g1)
-            if wg == self._floor:
-                continue
+            rg, wg = (g1, g2) if bool(r1s[k]) else (g2, g1)
             mujoco.mj_contactForce(m, d, k, f6)
             name = m.geom(wg).name
             obstacle = int(name[3:]) if name.startswith("obs") else None
