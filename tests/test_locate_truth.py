@@ -11,31 +11,10 @@ import pytest
 from ssl_core.cli import main as locate_main
 from ssl_core.scoring import Scorer, Truth
 from ssl_sim.cli import main as rescue_main
+from test_record import TWO_CALLERS as RECORDED_TWO_CALLERS
 
-TWO_CALLERS = """
-name = "two_callers_scored"
-description = "Empty lab, two people calling continuously"
-seed = 0
-[scene]
-name = "empty_lab"
-[robot]
-start = [3.0, 3.0, 0.0]
-[[victims]]
-position = [4.6, 3.9, 0.1]
-sound = "continuous"
-speaker = "male"
-level_db_spl = 65.0
-[[victims]]
-position = [2.0, 1.4, 1.2]
-sound = "continuous"
-speaker = "female"
-level_db_spl = 65.0
-[noise]
-level_db_spl = 30.0
-[acoustics]
-rt60_s = 0.3
-max_rir_s = 0.5
-"""
+# the two-caller scene of the recording tests, under its own name (its own output files)
+TWO_CALLERS = RECORDED_TWO_CALLERS.replace('name = "two_callers"', 'name = "two_callers_scored"')
 
 
 @pytest.fixture(scope="module")
