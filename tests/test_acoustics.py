@@ -261,6 +261,11 @@ def test_bad_positions_and_inputs_raise_clear_errors():
     sim = AcousticSimulator(world, AcousticConfig(late_reverb=False), [SoundSource((1.0, 1.0, 1.0), white(), 60.0)])
     with pytest.raises(ValueError, match=r"mic_positions_world\[0\].*inside obstacle"):
         sim.listen(np.array([[3.0, 2.5, 0.8], [1.0, 4.0, 1.0]]), 0.1)
+    # a microphone on the array's face pressed 4 mm into the box's top (z 1.0 m): a contact, heard as at the face
+    x = sim.listen(np.array([[3.0, 2.5, 0.996], [1.0, 4.0, 1.0]]), 0.1)
+    assert x.shape[0] == 2 and np.all(np.isfinite(x)) and np.abs(x[0]).max() > 0
+    with pytest.raises(ValueError, match=r"mic_positions_world\[0\].*inside obstacle"):   # 3 cm deep: misplaced
+        sim.listen(np.array([[3.0, 2.5, 0.97], [1.0, 4.0, 1.0]]), 0.1)
     with pytest.raises(ValueError, match="shape"):
         sim.listen(np.zeros((8, 2)), 0.1)
     with pytest.raises(ValueError, match="duration_s"):

@@ -247,10 +247,13 @@ class AcousticScene:
         areas, _ = self.surface_table()
         return 4.0 * self.volume / float(areas.sum())
 
-    def check_point(self, point, what: str, margin: float = 0.01) -> np.ndarray:
+    def check_point(self, point, what: str, margin: float = 0.01, obstacle_margin: float | None = None) -> np.ndarray:
         """Validate that ``point`` (world, m) is in the room's air (not in a modelled obstacle); return it.
 
-        ``what`` names the point in the error (e.g. ``"sources[1].position"``)."""
+        ``what`` names the point in the error (e.g. ``"sources[1].position"``); ``margin``: clearance (m) from the
+        walls and, unless ``obstacle_margin`` is given, from the obstacles (negative: that deep inside is let
+        pass)."""
+        ob_margin = margin if obstacle_margin is None else obstacle_margin
         p = np.asarray(point, float)
         if p.shape != (3,) or not np.all(np.isfinite(p)):
             raise ValueError(f"{what}: expected 3 finite coordinates (world, m), got {point!r}")
@@ -260,14 +263,14 @@ class AcousticScene:
                 f"(needs {margin * 100:.0f} cm clearance from the walls)"
             )
         for i, b in self.boxes:
-            if b.contains(p, margin=margin):
+            if b.contains(p, margin=ob_margin):
                 raise ValueError(
                     f"{what}: {np.round(p, 3).tolist()} is inside obstacle {i} ({b.kind}, centre {list(b.center)}, "
                     f"size {list(b.size)}); sources and microphones must be in air"
                 )
         return p
 
-    def inside_air_all(self, points, margin: float = 0.0) -> bool:
+    def inside_air_all(self, points, margin: float = 0.0, obstacle_margin: float | None = None) -> bool:
         """Whether all ``points`` (n, 3) (world, m) are finite, in the room and outside every modelled obstacle,
         with ``margin`` (m) clearance (vectorised :meth:`check_point` without the error message)."""
         p = np.asarray(points, float).reshape(-1, 3)
@@ -277,7 +280,7 @@ class AcousticScene:
             return True
         c = np.array([b.center for _, b in self.boxes])
         r = np.array([b.rotation for _, b in self.boxes])
-        h = np.array([b.size for _, b in self.boxes]) / 2 + margin
+        h = np.array([b.size for _, b in self.boxes]) / 2 + (margin if obstacle_margin is None else obstacle_margin)
         local = np.einsum("bji,nbj->nbi", r, p[:, None, :] - c[None])
         return not np.any(np.all(np.abs(local) <= h[None], axis=-1))
 

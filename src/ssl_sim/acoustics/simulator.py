@@ -38,6 +38,8 @@ from .sources import PAPER_LEVEL_DB_SPL, SoundSource, victim_source
 
 #: Default RIR length cap (s).
 DEFAULT_MAX_RIR_S = 4.0
+#: How deep (m) a microphone may lie inside an obstacle its cube is pressed against (soft-contact penetration).
+MIC_CONTACT_DEPTH_M = 0.02
 
 
 @dataclass(frozen=True)
@@ -310,9 +312,13 @@ class AcousticSimulator:
         mics = np.asarray(mic_positions_world, float)
         if mics.ndim != 2 or mics.shape[1] != 3 or mics.shape[0] < 1:
             raise ValueError(f"mic_positions_world: expected shape (n_mics, 3) in world metres, got {mics.shape}")
-        if not self.scene.inside_air_all(mics, margin=0.005):  # fast path; the loop names the bad one
+        # The robot's microphones sit on the faces of a cube that collides with the rubble: MuJoCo's soft contacts
+        # let a face pressed against a slab sink a few millimetres into it, so a microphone up to
+        # MIC_CONTACT_DEPTH_M inside an obstacle is a contact, not a misplaced microphone.
+        ok = dict(margin=0.005, obstacle_margin=-MIC_CONTACT_DEPTH_M)
+        if not self.scene.inside_air_all(mics, **ok):  # fast path; the loop names the bad one
             for i, p in enumerate(mics):
-                self.scene.check_point(p, f"mic_positions_world[{i}]", margin=0.005)
+                self.scene.check_point(p, f"mic_positions_world[{i}]", **ok)
         return mics
 
     def pressure(self, mic_positions_world, n0: int, n: int, channels: Sequence[int] | None = None,
