@@ -7,11 +7,11 @@ import numpy as np
 import pytest
 
 from robot.hal import AudioBlock, AudioSource, DriveStatus, EndOfAudio, ManualClock
-from robot.motion import MotionConfig
+from robot.motion import ContactKind, MotionConfig
 from robot.odometry import Odometry
 from robot.ranging import RangeLayout
 from robot.replay import DryRunDrive
-from robot.rescue import Decision, RescueBehaviour, RescueConfig, RescueEvent
+from robot.rescue import Decision, FindCriterion, RescueBehaviour, RescueConfig, RescueEvent
 from robot.sound_map import SourceClass, SourceState
 from ssl_core.geometry import cube8
 from sound_dataset import recordings
@@ -599,3 +599,41 @@ def test_a_voiced_mouth_right_below_heard_once_is_listened_to_again_not_left():
     assert math.dist(found[0].data["position"], caller.position[:2]) < 0.15
     assert w.pose() == pytest.approx((0.0, 0.0, 0.0), abs=1e-9)      # it never moved
     assert not any(any(c.twist) for c in w.drive.commands)
+
+
+def test_contacts_and_finds_are_counted_by_kind_in_the_results():
+    # The 2 m wall between robot and caller: the bumper closes on it at least once; every press is a contact
+    # of kind bumper (counted from the drive's own bumper readings, rising edges), the find is a voiced caller
+    # heard steeply from close up, nothing stalls or slips on a flat floor without debris.
+    from ssl_sim.runner import outcome_counts
+    wall = [(1.2, y, 0.12) for y in np.arange(-1.0, 1.01, 0.2)]
+    w = World([Source((3.0, 0.0, 0.1), 65.0)], obstacles=wall, seed=1)
+    presses = []
+    status = w.drive.status
+
+    def watched():
+        st = status()
+        if st.bumper and not (presses and presses[-1]):
+            presses.append(True)
+        elif not st.bumper and presses and presses[-1]:
+            presses.append(False)
+        return st
+
+    w.drive.status = watched
+    b = make(w, RescueConfig(max_victims=1))
+    b.run(max_time=200.0)
+    assert b.done and len(b.victims) == 1
+    n_presses = presses.count(True)
+    assert n_presses >= 1
+    declarations = [{"kind": "find", "cue": v.cue} for v in b.victims]
+    counts = outcome_counts(b, declarations)
+    assert set(counts["contacts_by_kind"]) == {k.value for k in ContactKind}
+    assert counts["contacts_by_kind"]["bumper"] == n_presses
+    assert counts["contacts_by_kind"]["stall"] == counts["contacts_by_kind"]["slip"] == 0
+    assert counts["contacts_by_kind"]["fault"] == 0
+    assert set(counts["finds_by_criterion"]) == {c.value for c in FindCriterion}
+    assert sum(counts["finds_by_criterion"].values()) == 1
+    assert b.victims[0].cue in (FindCriterion.STEEP_BEARING, FindCriterion.LEVEL_RISE)
+    assert counts["finds_by_criterion"][b.victims[0].cue.value] == 1
+    # a declaration scored anything but "find" is not counted
+    assert sum(outcome_counts(b, [{"kind": "false_find", "cue": b.victims[0].cue}])["finds_by_criterion"].values()) == 0

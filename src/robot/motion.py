@@ -12,6 +12,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields
+from enum import StrEnum
 from typing import Callable
 
 import numpy as np
@@ -20,7 +21,7 @@ from robot.hal import Clock, DriveBase, DriveStatus
 from robot.odometry import Odometry
 from robot.ranging import RangeLayout
 
-__all__ = ["MotionConfig", "Blocked", "Motion", "StallWatch"]
+__all__ = ["MotionConfig", "ContactKind", "Blocked", "Motion", "StallWatch"]
 
 
 @dataclass(frozen=True)
@@ -48,11 +49,22 @@ class MotionConfig:
                 raise ValueError(f"MotionConfig.{f.name}={v!r}: expected a finite number > 0")
 
 
-class Blocked(Exception):
-    """A move ended early: ``kind`` is "bumper", "stall", "slip", "range" or "fault"; ``heading`` the direction of
-    the attempted motion in the odometry frame (rad) for mapping the contact."""
+class ContactKind(StrEnum):
+    """Why a move ended early; the value is its keyword in logs, the occupancy grid and ``results.json``."""
 
-    def __init__(self, kind: str, status: DriveStatus, heading: float = 0.0) -> None:
+    BUMPER = "bumper"   # the bumper ring touched something
+    STALL = "stall"     # the drive's stall flag, or too little odometry progress for the command (StallWatch)
+    SLIP = "slip"       # the gyro disagrees with the wheels for slip_intervals readings in a row
+    RANGE = "range"     # a range return inside the swept corridor ahead (no touch: stopped before it)
+    FAULT = "fault"     # a fatal drive fault (no contact: the mission ends)
+
+
+class Blocked(Exception):
+    """A move ended early: ``kind`` says why (``ContactKind``); ``heading`` the direction of the attempted motion
+    in the odometry frame (rad) for mapping the contact."""
+
+    def __init__(self, kind: ContactKind | str, status: DriveStatus, heading: float = 0.0) -> None:
+        kind = ContactKind(kind)   # a name outside ContactKind raises ValueError here
         super().__init__(kind)
         self.kind, self.status, self.heading = kind, status, heading
 
@@ -141,15 +153,15 @@ class Motion:
         st = self.status()
         kind = None
         if self.fatal(st):
-            kind = "fault"
+            kind = ContactKind.FAULT
         elif st.bumper and bumper_armed:
-            kind = "bumper"
+            kind = ContactKind.BUMPER
         elif st.stalled:
-            kind = "stall"
+            kind = ContactKind.STALL
         elif self._slips >= self.config.slip_intervals:
-            kind = "slip"
+            kind = ContactKind.SLIP
         elif way is not None and self._in_the_way(st, way[0], min(way[1], self.config.range_stop_m)):
-            kind = "range"
+            kind = ContactKind.RANGE
         if kind is not None:
             self.stop()
             self.update_odometry()
@@ -179,7 +191,7 @@ class Motion:
                 self._check(True, yaw)
                 if watch.stalled(self.clock.now(), float(self._tick_odometry()[2]), abs(omega)):
                     self.stop()
-                    raise Blocked("stall", DriveStatus(stalled=True), yaw)
+                    raise Blocked(ContactKind.STALL, DriveStatus(stalled=True), yaw)
         finally:
             self.stop()
         self.update_odometry()
@@ -215,7 +227,7 @@ class Motion:
                 x, y, _ = self._tick_odometry()
                 if watch.stalled(self.clock.now(), (x - x0) * ux + (y - y0) * uy, v):
                     self.stop()
-                    raise Blocked("stall", DriveStatus(stalled=True), world_heading)
+                    raise Blocked(ContactKind.STALL, DriveStatus(stalled=True), world_heading)
         finally:
             self.stop()
         self.update_odometry()

@@ -47,7 +47,8 @@ import dataclasses
 import logging
 import math
 from dataclasses import dataclass, field, fields
-from enum import Enum
+from collections import Counter
+from enum import Enum, StrEnum
 from typing import Any
 
 import numpy as np
@@ -56,7 +57,7 @@ from robot.coverage import CoverageConfig, ListeningCoverage
 from robot.hal import AudioSource, Clock, DriveBase, DriveStatus, EndOfAudio
 from robot.kinematics import OmniDriveParams
 from robot.listening import ListenEvidence, Listener
-from robot.motion import Blocked, Motion, MotionConfig
+from robot.motion import Blocked, ContactKind, Motion, MotionConfig
 from robot.occupancy import MapMemoryError, OccupancyConfig, OccupancyGrid
 from robot.odometry import GyroFusionConfig, Odometry, TravelConfig, wrap_angle
 from robot.planner import Plan, Planner, PlannerConfig
@@ -284,16 +285,26 @@ class RescueEvent:
         return f"[{self.time:8.2f} s] {self.state.value:<8} {self.decision.value:<13} {self.reason}"
 
 
+class FindCriterion(StrEnum):
+    """Which found cue declared a victim; the value is its keyword in ``results.json`` (``finds_by_criterion``)."""
+
+    STEEP_BEARING = "steep_bearing"    # (1) the bearing heard now is steeper than found_elevation_deg
+    LEVEL_RISE = "level_rise"          # (2) steeper than corroborated_elevation_deg and louder by level_rise_db
+    MAP_ESTIMATE = "map_estimate"      # (3) the map puts it within cue_distance_m, tight, the bearing pointing down
+    CONTACT = "contact"                # (4) the bumper or the range sensors stopped a move at a voiced target
+
+
 @dataclass(frozen=True)
 class FoundVictim:
     """A victim declared found: the map's estimated ``position`` (x, y) and ``height`` (m) in the odometry frame."""
 
     position: tuple[float, float]
     time: float
-    criterion: str
+    criterion: str            # the cue in words, with the measured values
     height: float
     voice: float = 0.0        # P(victim) of the map source when declared
     source_id: int = -1
+    cue: FindCriterion | None = None   # which cue (None: declared by a caller of ``_declare_found`` without one)
 
 
 class RescueBehaviour:
@@ -347,9 +358,10 @@ class RescueBehaviour:
         self._restarted: set[int] = set()         # sources re-estimated from the listens at their old estimate
         self._evidence: list[ListenEvidence] = []  # every bearing heard from the current spot (robot frame)
         self._evidence_at: np.ndarray | None = None  # that spot (world x, y) and the yaw (rad) at it
-        self._cue: dict[int, tuple[str, bool]] = {}   # the found cue a source showed in an earlier listen (and
-        #                                                whether it was a steep bearing)
+        self._cue: dict[int, tuple[str, FindCriterion]] = {}   # the found cue a source showed in an earlier
+        #                                                         listen (words, kind)
         self._target_contacts: dict[int, int] = {}
+        self.contacts: Counter[ContactKind] = Counter()   # every move that ended early, by why (results.json)
         self._baseline_steps: dict[int, int] = {}
         self._side = 1.0                          # alternating side of baseline steps
         self._faults_seen: tuple[str, ...] = ()
@@ -415,8 +427,9 @@ class RescueBehaviour:
         if self._check_faults(status):
             return
         if status.bumper or status.stalled:
-            self._recover(Blocked("bumper" if status.bumper else "stall", status, float(self.pose[2])),
-                          "at the start of a cycle")
+            b = Blocked(ContactKind.BUMPER if status.bumper else ContactKind.STALL, status, float(self.pose[2]))
+            self.contacts[b.kind] += 1
+            self._recover(b, "at the start of a cycle")
             return
         self.motion.stop()
         heard = self._listen()
@@ -517,7 +530,7 @@ class RescueBehaviour:
                 continue
             if s.state in (SourceState.FOUND, SourceState.REJECTED) or self._near_found(s.position, s.id):
                 continue
-            crit, steep_cue = None, False
+            crit, cue = None, None
             ev = heard_by.get(sid)
             # Beside a machine checked from close up only a voice makes a victim: its reflections off nearby
             # rubble arrive steep and loud (dense_pump: a -41 deg bearing 0.4 m from the pump).
@@ -533,11 +546,11 @@ class RescueBehaviour:
                 rise = ev.level_db - faintest
                 if steep >= cfg.found_elevation_deg:
                     crit = f"elevation {-steep:.0f} deg is steeper than -{cfg.found_elevation_deg:g} deg"
-                    steep_cue = True
+                    cue = FindCriterion.STEEP_BEARING
                 elif steep >= cfg.corroborated_elevation_deg and rise >= cfg.level_rise_db:
                     crit = (f"elevation {-steep:.0f} deg (< -{cfg.corroborated_elevation_deg:g}) and level rose "
                             f"{rise:.1f} dB (>= {cfg.level_rise_db:g})")
-                    steep_cue = True
+                    cue = FindCriterion.LEVEL_RISE
             # A voiced mouth right below in a bearing that began a source of its own (the caller's map estimate
             # was off): criteria 1-2 need a second listen of it, so take it here rather than step away across
             # the bearing (measured, dense_pump seed 11: heard -35 deg down 0.33 m from her, then left).
@@ -556,18 +569,20 @@ class RescueBehaviour:
                     and ev.level_db - min(r.level_db for r in s.history) >= cfg.supporting_rise_db:
                 crit = (f"map estimate {d:.2f} m away (<= {cfg.cue_distance_m:g}), +- "
                         f"{s.horizontal_sigma_m:.2f} m from {s.n_inliers} listens")
+                cue = FindCriterion.MAP_ESTIMATE
             reached = d <= cfg.found_distance_m and s.horizontal_sigma_m <= cfg.found_sigma_m and s.triangulated
             if crit is not None:
                 crit += f" (SRP power {ev.power:.2f})"
-                self._cue[sid] = (crit, steep_cue)
+                self._cue[sid] = (crit, cue)
             elif reached and sid in self._cue:
                 # It showed a found cue from here before and is silent now: a caller pauses (measured, light rubble
                 # seed 7: the caller behind the pillar heard steep and 10-18 dB louder in three listens, then
                 # rejected as a reflection on the fourth, in which it did not call).
-                earlier, steep_cue = self._cue[sid]
+                earlier, cue = self._cue[sid]
                 crit = f"{earlier}, in an earlier listen; map estimate {d:.2f} m away"
             if crit is None and reached and not self._approachable(s):
-                crit = f"map estimate {d:.2f} m away, +- {s.horizontal_sigma_m:.2f} m"   # a machine: no elevation cue
+                # A machine: no elevation cue. Never declared (not approachable: rejected below).
+                crit, cue = f"map estimate {d:.2f} m away, +- {s.horizontal_sigma_m:.2f} m", FindCriterion.MAP_ESTIMATE
             elif crit is None and reached:
                 # At its estimate and no cue says a mouth is here: listen a few times, then it is a reflection
                 # (a mirror image beyond a wall triangulates as tightly as a caller: measured in light rubble).
@@ -621,6 +636,7 @@ class RescueBehaviour:
             # makes it a victim (a buried caller the VAD misses, one who knocks); a tight triangulation near
             # rubble alone does not (measured, half_buried_slab seed 1: a voiceless reflection declared by its
             # map estimate, 1.3 m from a victim).
+            steep_cue = cue in (FindCriterion.STEEP_BEARING, FindCriterion.LEVEL_RISE)
             if not voiced and not steep_cue:
                 self._reject(s, f"reached ({crit}) but no voice heard (P(victim) {s.victim_probability:.2f})")
                 continue
@@ -641,7 +657,7 @@ class RescueBehaviour:
                     continue
                 s = self.map.source(self.map.add_found(floor, self.clock.now()))
                 crit += f"; where this bearing meets the floor (the source it joined is mapped {d:.2f} m away)"
-            self._declare_found(s, crit)
+            self._declare_found(s, crit, cue)
             return True
         return False
 
@@ -711,18 +727,18 @@ class RescueBehaviour:
         """May be declared a found victim: classified victim, or (unless ``require_voice``) not yet classified."""
         return s.cls is SourceClass.VICTIM or (not self.config.require_voice and s.cls is SourceClass.UNKNOWN)
 
-    def _declare_found(self, s: MapSource, criterion: str) -> None:
+    def _declare_found(self, s: MapSource, criterion: str, cue: FindCriterion) -> None:
         cfg = self.config
         self.map.set_state(s.id, SourceState.FOUND, self.clock.now())
         pos = (float(s.position[0]), float(s.position[1]))
         height = float(np.clip(s.position[2], 0.0, 2.0))
-        self.victims.append(FoundVictim(pos, self.clock.now(), criterion, height, s.victim_probability, s.id))
+        self.victims.append(FoundVictim(pos, self.clock.now(), criterion, height, s.victim_probability, s.id, cue))
         if self.target == s.id:
             self.target, self.plan = None, None
         self.state = RescueState.FOUND
         self._emit(Decision.VICTIM_FOUND, f"victim #{len(self.victims)} (source #{s.id}) at ({pos[0]:.2f}, "
                                           f"{pos[1]:.2f}) m +- {s.horizontal_sigma_m:.2f} m: {criterion}",
-                   {"position": pos, "height": height, "source": s.id, "criterion": criterion,
+                   {"position": pos, "height": height, "source": s.id, "criterion": criterion, "cue": cue,
                     "sigma_m": s.horizontal_sigma_m, "victim_probability": s.victim_probability})
         if cfg.max_victims is not None and len(self.victims) >= cfg.max_victims:
             self._finish(Decision.ALL_FOUND, f"found {len(self.victims)} victim(s) = max_victims")
@@ -829,9 +845,10 @@ class RescueBehaviour:
 
     def _blocked(self, b: Blocked, target: MapSource | None) -> None:
         cfg = self.config
-        if b.kind == "fault":
+        self.contacts[b.kind] += 1
+        if b.kind is ContactKind.FAULT:
             return  # the mission is over (_check_faults finished it)
-        if b.kind in ("bumper", "range") and target is not None:
+        if b.kind in (ContactKind.BUMPER, ContactKind.RANGE) and target is not None:
             s = self.map.source(target.id)
             x, y, _ = self.pose
             d = s.distance_to((x, y))
@@ -849,10 +866,10 @@ class RescueBehaviour:
                     and s.horizontal_sigma_m <= 2 * cfg.found_sigma_m and voiced and down \
                     and self.clock.now() - s.last_time <= cfg.bump_heard_within_s \
                     and (s.cls is SourceClass.VICTIM or not self._near_machine(s)):
-                touch = "bumped into it" if b.kind == "bumper" else "stopped before an obstacle at it"
+                touch = "bumped into it" if b.kind is ContactKind.BUMPER else "stopped before an obstacle at it"
                 self._declare_found(s, f"{touch} while approaching (estimate {d:.2f} m ahead, "
-                                       f"{math.degrees(off):.0f} deg off the motion)")
-                if not self.done and b.kind == "bumper":
+                                       f"{math.degrees(off):.0f} deg off the motion)", FindCriterion.CONTACT)
+                if not self.done and b.kind is ContactKind.BUMPER:
                     self._back_off(b.heading, "clear the bumper after touching the victim")
                 return
         if target is not None:
@@ -861,7 +878,7 @@ class RescueBehaviour:
                 # Walls the robot cannot see: a mirror image beyond a wall draws it along the wall forever.
                 self.planner.mark_unreachable(target.id, self.clock.now())
                 self._target_contacts[target.id] = 0
-        if b.kind == "range":
+        if b.kind is ContactKind.RANGE:
             self._scan_pose = None
             self._sensed(self.pose, b.status)     # the reading that stopped the move goes into the grid
             seen = [round(r, 2) if math.isfinite(r) else None for r in b.status.ranges or ()]
@@ -871,10 +888,11 @@ class RescueBehaviour:
 
     def _recover(self, b: Blocked, when: str) -> None:
         contact = self.grid.mark_contact(self.pose, b.heading, b.kind)
-        if b.kind == "bumper":
+        if b.kind is ContactKind.BUMPER:
             self.coverage.shadow(contact, b.heading, self.grid.config.contact_width_m)
         self.state = RescueState.RECOVER
-        what = {"bumper": "bumper pressed", "stall": "wheels stalled", "slip": "wheels slipping (gyro)"}[b.kind]
+        what = {ContactKind.BUMPER: "bumper pressed", ContactKind.STALL: "wheels stalled",
+                ContactKind.SLIP: "wheels slipping (gyro)"}[b.kind]
         self._emit(Decision.RECOVER, f"{what} {when}: obstacle mapped at ({contact[0]:.2f}, {contact[1]:.2f}), "
                                      f"back off {self.motion.config.backoff_m:g} m and replan",
                    {"bumper": b.status.bumper, "stalled": b.status.stalled, "kind": b.kind,
@@ -887,7 +905,8 @@ class RescueBehaviour:
             self.motion.back_off(heading_world)
             return True
         except Blocked as b:
-            if b.kind != "fault":
+            self.contacts[b.kind] += 1
+            if b.kind is not ContactKind.FAULT:
                 self.grid.mark_contact(self.pose, b.heading, b.kind)
                 self._emit(Decision.RECOVER, f"backing off blocked ({b.kind}) after: {why}", {"kind": b.kind})
             return False
@@ -908,7 +927,8 @@ class RescueBehaviour:
                 try:
                     self.motion.turn(math.radians(self.config.wedged_turn_deg))
                 except Blocked as b:
-                    if b.kind == "fault":
+                    self.contacts[b.kind] += 1
+                    if b.kind is ContactKind.FAULT:
                         return
             yaw = float(self.pose[2])
             kinds = []
@@ -923,7 +943,8 @@ class RescueBehaviour:
                                {"kind": "escape"})
                     return
                 except Blocked as b:
-                    if b.kind == "fault":
+                    self.contacts[b.kind] += 1
+                    if b.kind is ContactKind.FAULT:
                         return
                     kinds.append(f"{math.degrees(heading):.0f} deg: {b.kind}")
                     self.grid.mark_contact(self.pose, yaw + heading, b.kind)

@@ -25,7 +25,9 @@ What is measured (all from the simulator's truth, never from the robot's own est
   seconds of this process (a machine shared with other work inflates the wall clock, not the CPU time).
 
 results.json also lists every declaration (``declarations``: reported position, base position, its kind:
-find, false_find, too_far or late), the false finds alone (``false_finds``), ``n_reached``, the scoring
+find, false_find, too_far or late; ``cue``: the ``robot.rescue.FindCriterion`` that declared it), the finds counted
+by that cue (``finds_by_criterion``), every move that ended early counted by why (``contacts_by_kind``:
+``robot.motion.ContactKind``), the false finds alone (``false_finds``), ``n_reached``, the scoring
 constants (``scoring``) and where the result came from (``provenance``: commit, package versions, BLAS kernel,
 CPU).
 """
@@ -47,7 +49,8 @@ import numpy as np
 from robot.odometry import Odometry, wrap_angle
 from robot.ranging import RangeLayout, ray_ends
 from robot.monitored_audio import MonitoredAudio
-from robot.rescue import Decision, RescueBehaviour, RescueEvent
+from robot.motion import ContactKind
+from robot.rescue import Decision, FindCriterion, RescueBehaviour, RescueEvent
 from robot.vad import ModelError
 from ssl_core.geometry import cube8
 from ssl_core.health import HealthConfig, MicHealth
@@ -302,7 +305,8 @@ class RescueRun:
             _, x, y, _, _ = self._pose_at(ev.time)
             est = ev.data.get("position", (math.nan, math.nan))
             j = self.judge.declare(ev.time, est, (x, y))
-            entry = {"time_s": _r(ev.time, 2), "criterion": ev.data.get("criterion", ""), "kind": j.kind,
+            entry = {"time_s": _r(ev.time, 2), "criterion": ev.data.get("criterion", ""),
+                     "cue": str(ev.data["cue"]) if ev.data.get("cue") is not None else None, "kind": j.kind,
                      "estimate": [_r(est[0]), _r(est[1])], "robot_position": [_r(x), _r(y)],
                      "victim": self.sources[j.victim].name if j.victim is not None else None,
                      "estimate_error_m": _r(j.report_error_m), "robot_distance_m": _r(j.base_distance_m),
@@ -445,6 +449,7 @@ class RescueRun:
             "path_length_m": _r(self.cum_path[-1]), "collisions": len(self.collisions),
             "collision_log": self.collisions, "bumper_recoveries": bumps,
             "range_stops": sum(1 for e in self.events if e.decision is Decision.OBSTACLE),
+            **outcome_counts(self.behaviour, self.declarations),
             "n_listens": len(self.listens),
             "angular_error_deg": {"all_detections": stats(errs), "strongest_detection": stats(first)},
             "listens": self.listens,
@@ -461,6 +466,14 @@ class RescueRun:
                              "other": _r(loop_s - phys - acou - loc, 3),
                              "per_sim_second": _r(loop_s / max(sim_t, 1e-9), 4), "cpu": self._cpu_split()},
         }
+
+
+def outcome_counts(behaviour: RescueBehaviour, declarations: list[dict]) -> dict[str, dict[str, int]]:
+    """``contacts_by_kind``: the behaviour's moves that ended early, by ``ContactKind``; ``finds_by_criterion``: the
+    declarations scored "find", by the ``FindCriterion`` that declared them (every member listed, zeros too)."""
+    return {"contacts_by_kind": {k.value: behaviour.contacts[k] for k in ContactKind},
+            "finds_by_criterion": {c.value: sum(1 for d in declarations if d["kind"] == "find" and d.get("cue") == c)
+                                   for c in FindCriterion}}
 
 
 def _json_default(o):
