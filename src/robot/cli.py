@@ -238,7 +238,7 @@ def _stop(drive) -> str:
 
 def _print_event(e: RescueEvent, as_json: bool, out) -> None:
     if as_json:
-        data = {k: v for k, v in e.data.items() if k != "candidates"}
+        data = {k: v for k, v in e.data.to_dict().items() if k != "candidates"}
         print(json.dumps({"time": round(e.time, 3), "state": e.state.value, "decision": e.decision,
                           "reason": e.reason, "data": data}, default=_jsonable), file=out, flush=True)
     else:

@@ -46,13 +46,16 @@ from __future__ import annotations
 import dataclasses
 import logging
 import math
-from dataclasses import dataclass, field, fields
+from dataclasses import dataclass, fields
 from collections import Counter
-from enum import Enum, StrEnum
-from typing import Any
 
 import numpy as np
 
+# The behaviour's vocabulary (robot.events), importable from here too.
+from robot.events import (FINAL, ContactPayload, Decision, DriveFaultPayload, DrivePayload, ErrorPayload,
+                          FindCriterion, FinishPayload, FoundPayload, HeardCandidate, HeardPayload, ObstaclePayload,
+                          Payload, RecoverPayload, RejectedPayload, RescueEvent, RescueState, SourcePayload,
+                          TargetPayload, TimeUpPayload)
 from robot.coverage import CoverageConfig, ListeningCoverage
 from robot.hal import AudioSource, Clock, DriveBase, DriveStatus, EndOfAudio
 from robot.kinematics import OmniDriveParams
@@ -70,48 +73,6 @@ log = logging.getLogger(__name__)
 #: Range readings go into the grid once per 5 cm of travel or 10 deg of turn (control ticks are 1.25 cm apart).
 SCAN_SPACING_M = 0.05
 SCAN_TURN = math.radians(10.0)
-
-
-class RescueState(str, Enum):
-    """Phase of the behaviour (the state an event was decided in)."""
-
-    LISTEN = "listen"          # standing, listening, deciding
-    APPROACH = "approach"      # moving toward the target
-    FOUND = "found"            # a victim was just declared found
-    RECOVER = "recover"        # backing off after a contact
-    EXPLORE = "explore"        # moving without a target
-    DONE = "done"              # finished: max victims, stuck, audio ended, fatal fault
-
-
-class Decision(str, Enum):
-    """What an event says; the value is its keyword in logs and ``results.json``."""
-
-    HEARD = "heard"                # data: n_detections, candidates [{source, azimuth, elevation, level_db,
-    #                                voice}], ignored, pose
-    NO_SOURCE = "no_source"        # data: same as HEARD
-    TARGET = "target"              # data: source, position (x, y, z), sigma_m, victim_probability, azimuth,
-    #                                elevation (array frame, toward the estimate), path_m, waypoints
-    NO_TARGET = "no_target"
-    DRIVE = "drive"                # data: distance, heading (robot frame), goal (world x, y)
-    EXPLORE = "explore"            # data: distance, heading, goal
-    VICTIM_FOUND = "victim_found"  # data: position (x, y) estimated, height, source, criterion, sigma_m
-    REJECTED = "rejected"          # an interferer reached and still without voice: data source, position
-    RECOVER = "recover"            # data: bumper, stalled, kind, contact (world x, y)
-    OBSTACLE = "obstacle"          # a move stopped before a range return in its way; data: ranges (m, per sensor)
-    DRIVE_FAULT = "drive_fault"    # data: faults
-    ALL_FOUND = "all_found"        # data: victims
-    STUCK = "stuck"
-    FAULT = "fault"
-    AUDIO_ENDED = "audio_ended"
-    TIME_UP = "time_up"
-    ERROR = "error"                # data: exception
-
-    def __str__(self) -> str:
-        return self.value
-
-
-#: Decisions that end the mission.
-FINAL = frozenset({Decision.ALL_FOUND, Decision.STUCK, Decision.FAULT, Decision.AUDIO_ENDED})
 
 
 @dataclass(frozen=True)
@@ -271,30 +232,6 @@ class RescueConfig:
 
 
 @dataclass(frozen=True)
-class RescueEvent:
-    """One decision: ``time`` (s, clock), the ``state`` it was taken in, the ``decision``,
-    a human-readable ``reason`` and machine-readable ``data`` (SI units, angles in rad)."""
-
-    time: float
-    state: RescueState
-    decision: Decision
-    reason: str
-    data: dict[str, Any] = field(default_factory=dict)
-
-    def __str__(self) -> str:
-        return f"[{self.time:8.2f} s] {self.state.value:<8} {self.decision.value:<13} {self.reason}"
-
-
-class FindCriterion(StrEnum):
-    """Which found cue declared a victim; the value is its keyword in ``results.json`` (``finds_by_criterion``)."""
-
-    STEEP_BEARING = "steep_bearing"    # (1) the bearing heard now is steeper than found_elevation_deg
-    LEVEL_RISE = "level_rise"          # (2) steeper than corroborated_elevation_deg and louder by level_rise_db
-    MAP_ESTIMATE = "map_estimate"      # (3) the map puts it within cue_distance_m, tight, the bearing pointing down
-    CONTACT = "contact"                # (4) the bumper or the range sensors stopped a move at a voiced target
-
-
-@dataclass(frozen=True)
 class FoundVictim:
     """A victim declared found: the map's estimated ``position`` (x, y) and ``height`` (m) in the odometry frame."""
 
@@ -391,7 +328,7 @@ class RescueBehaviour:
             failed = self._safe_stop()
             outcome = "drive stopped" if failed is None else f"stopping the drive failed too ({failed})"
             self._emit(Decision.ERROR, f"{type(exc).__name__}: {exc}; {outcome}",
-                       {"exception": type(exc).__name__, "stopped": failed is None})
+                       ErrorPayload(type(exc).__name__, failed is None))
             raise
         finally:
             self._safe_stop()
@@ -408,7 +345,7 @@ class RescueBehaviour:
                 out += self.step()
             if not self.done:
                 self._step_events = []
-                self._emit(Decision.TIME_UP, f"mission time of {max_time:g} s used up", {"max_time": max_time})
+                self._emit(Decision.TIME_UP, f"mission time of {max_time:g} s used up", TimeUpPayload(max_time))
                 out += self._step_events
         finally:
             self._safe_stop()
@@ -450,11 +387,9 @@ class RescueBehaviour:
         self.target, self.plan = src.id, plan
         self.map.set_state(src.id, SourceState.APPROACHING)
         az, el = self._bearing_to(src.position)
-        self._emit(Decision.TARGET, why, {"source": src.id, "position": src.position.tolist(),
-                                          "sigma_m": src.horizontal_sigma_m,
-                                          "victim_probability": src.victim_probability, "azimuth": az,
-                                          "elevation": el, "path_m": plan.length,
-                                          "waypoints": plan.waypoints.tolist()})
+        self._emit(Decision.TARGET, why, TargetPayload(src.id, src.position.tolist(), src.horizontal_sigma_m,
+                                                       src.victim_probability, az, el, plan.length,
+                                                       plan.waypoints.tolist()))
         self._follow(plan, RescueState.APPROACH, Decision.DRIVE, src)
 
     def _keep_on_map(self) -> bool:
@@ -496,20 +431,19 @@ class RescueBehaviour:
         ignored = list(res.ignored)
         for ev, sid in assoc:
             s = self.map.source(sid)
-            row = {"source": sid, "azimuth": ev.azimuth, "elevation": ev.elevation, "level_db": ev.level_db,
-                   "voice": ev.speech_fraction, "voice_scan": ev.voice_scan, "class": s.cls.value,
-                   "state": s.state.value}
+            row = HeardCandidate(sid, ev.azimuth, ev.elevation, ev.level_db, ev.speech_fraction, ev.voice_scan,
+                                 s.cls.value, s.state.value)
             if s.state is SourceState.FOUND:
                 ignored.append(f"az {math.degrees(ev.azimuth):+.0f} deg el {math.degrees(ev.elevation):+.0f} deg "
                                f"is found victim #{self._victim_number(sid)}")
             else:
                 cands.append(row)
-        data = {"n_detections": res.n_detections, "candidates": cands, "ignored": ignored, "pose": pose.tolist()}
+        data = HeardPayload(res.n_detections, cands, ignored, pose.tolist())
         if cands:
             self._silent = 0
-            desc = "; ".join(f"#{c['source']} {c['class']} az {math.degrees(c['azimuth']):+.0f} deg "
-                             f"el {math.degrees(c['elevation']):+.0f} deg voice {c['voice']:.2f}"
-                             + (" (voice scan)" if c["voice_scan"] else "") for c in cands)
+            desc = "; ".join(f"#{c.source} {c.cls} az {math.degrees(c.azimuth):+.0f} deg "
+                             f"el {math.degrees(c.elevation):+.0f} deg voice {c.voice:.2f}"
+                             + (" (voice scan)" if c.voice_scan else "") for c in cands)
             self._emit(Decision.HEARD, desc + (f"; ignored: {'; '.join(ignored)}" if ignored else ""), data)
         else:
             self._silent += 1
@@ -600,7 +534,7 @@ class RescueBehaviour:
                     if n < cfg.refute_after_listens:
                         self._emit(Decision.NO_TARGET, f"at the estimate of source #{s.id} ({d:.2f} m), heard level or"
                                    f" past it ({math.degrees(ev.elevation):+.0f} deg): listen again "
-                                   f"({n}/{cfg.refute_after_listens})", {"source": s.id})
+                                   f"({n}/{cfg.refute_after_listens})", SourcePayload(s.id))
                         return True
                     kept = self.map.restart_from(sid, xy)
                     self._restarted.add(sid)
@@ -608,14 +542,14 @@ class RescueBehaviour:
                         counts.pop(sid, None)
                     self._emit(Decision.NO_TARGET, f"at the estimate of source #{s.id} ({d:.2f} m), heard level or "
                                f"past it ({math.degrees(ev.elevation):+.0f} deg) in {n} listens: it is farther along "
-                               f"that bearing; re-estimated from the {kept} listen(s) heard here", {"source": s.id})
+                               f"that bearing; re-estimated from the {kept} listen(s) heard here", SourcePayload(s.id))
                     continue
                 if ev is None:
                     n = self._unheard_at[sid] = self._unheard_at.get(sid, 0) + 1
                     if n < 2 * cfg.reject_after_listens:
                         self._emit(Decision.NO_TARGET, f"at the estimate of source #{s.id} ({d:.2f} m), not heard "
                                    f"in this listen: listen again ({n}/{2 * cfg.reject_after_listens})",
-                                   {"source": s.id})
+                                   SourcePayload(s.id))
                         return True
                 elif self._listen_again(s, f"at the estimate of source #{s.id} ({d:.2f} m), no found cue yet"):
                     return True
@@ -701,7 +635,7 @@ class RescueBehaviour:
         n = self._close_listens[s.id] = self._close_listens.get(s.id, 0) + 1
         if n < self.config.reject_after_listens:
             self._emit(Decision.NO_TARGET, f"{why}: listen again ({n}/{self.config.reject_after_listens})",
-                       {"source": s.id})
+                       SourcePayload(s.id))
             return True
         return False
 
@@ -710,7 +644,7 @@ class RescueBehaviour:
         self.map.set_state(s.id, SourceState.REJECTED, self.clock.now())
         if self.target == s.id:
             self.target, self.plan = None, None
-        self._emit(Decision.REJECTED, f"source #{s.id}: {why}", {"source": s.id, "position": s.position.tolist()})
+        self._emit(Decision.REJECTED, f"source #{s.id}: {why}", RejectedPayload(s.id, s.position.tolist()))
 
     def _near_found(self, xy, source_id: int | None = None) -> bool:
         """World point ``xy`` (m) is within ``found_exclusion_m`` of a victim already found other than
@@ -738,8 +672,7 @@ class RescueBehaviour:
         self.state = RescueState.FOUND
         self._emit(Decision.VICTIM_FOUND, f"victim #{len(self.victims)} (source #{s.id}) at ({pos[0]:.2f}, "
                                           f"{pos[1]:.2f}) m +- {s.horizontal_sigma_m:.2f} m: {criterion}",
-                   {"position": pos, "height": height, "source": s.id, "criterion": criterion, "cue": cue,
-                    "sigma_m": s.horizontal_sigma_m, "victim_probability": s.victim_probability})
+                   FoundPayload(pos, height, s.id, criterion, cue, s.horizontal_sigma_m, s.victim_probability))
         if cfg.max_victims is not None and len(self.victims) >= cfg.max_victims:
             self._finish(Decision.ALL_FOUND, f"found {len(self.victims)} victim(s) = max_victims")
 
@@ -767,7 +700,7 @@ class RescueBehaviour:
                 self.planner.clear_unreachable()
                 self.state = RescueState.RECOVER
                 self._emit(Decision.RECOVER, f"the learned obstacles close every way: {n} cell(s) marked by a single"
-                                             " contact forgotten (clearing recovery)", {"kind": "clear", "cells": n})
+                                             " contact forgotten (clearing recovery)", RecoverPayload("clear", n))
                 return
             self._escape("no reachable direction to explore")
             return
@@ -812,7 +745,7 @@ class RescueBehaviour:
                 self.planner.mark_unreachable(target.id, self.clock.now())
                 self._emit(Decision.NO_TARGET, f"source #{target.id} still +- {target.horizontal_sigma_m:.2f} m after "
                                                f"{cfg.max_baseline_steps} steps across its bearing: set aside a while",
-                           {"source": target.id})
+                           SourcePayload(target.id))
                 return
             bearing = math.atan2(target.position[1] - y, target.position[0] - x)
             side = self._side
@@ -829,8 +762,8 @@ class RescueBehaviour:
         self.state = state
         goal = legs[-1]
         self._emit(decision, f"{prefix + ': ' if prefix else ''}{total:.2f} m toward ({goal[0]:.2f}, {goal[1]:.2f})"
-                             f" in {len(legs)} leg(s)", {"distance": total, "goal": [float(goal[0]), float(goal[1])],
-                                                         "legs": [leg.tolist() for leg in legs]})
+                             f" in {len(legs)} leg(s)", DrivePayload(total, [float(goal[0]), float(goal[1])],
+                                                                     [leg.tolist() for leg in legs]))
         for leg in legs:
             start = self.pose[:2].copy()
             dx, dy = leg - start
@@ -882,7 +815,7 @@ class RescueBehaviour:
             self._scan_pose = None
             self._sensed(self.pose, b.status)     # the reading that stopped the move goes into the grid
             seen = [round(r, 2) if math.isfinite(r) else None for r in b.status.ranges or ()]
-            self._emit(Decision.OBSTACLE, "range sensors see an obstacle in the way: replan", {"ranges": seen})
+            self._emit(Decision.OBSTACLE, "range sensors see an obstacle in the way: replan", ObstaclePayload(seen))
             return
         self._recover(b, "while moving")
 
@@ -895,8 +828,7 @@ class RescueBehaviour:
                 ContactKind.SLIP: "wheels slipping (gyro)"}[b.kind]
         self._emit(Decision.RECOVER, f"{what} {when}: obstacle mapped at ({contact[0]:.2f}, {contact[1]:.2f}), "
                                      f"back off {self.motion.config.backoff_m:g} m and replan",
-                   {"bumper": b.status.bumper, "stalled": b.status.stalled, "kind": b.kind,
-                    "contact": contact.tolist()})
+                   ContactPayload(b.status.bumper, b.status.stalled, b.kind, contact.tolist()))
         if not self._back_off(b.heading, what):
             self._escape(f"backing off blocked after: {what}")
 
@@ -908,7 +840,7 @@ class RescueBehaviour:
             self.contacts[b.kind] += 1
             if b.kind is not ContactKind.FAULT:
                 self.grid.mark_contact(self.pose, b.heading, b.kind)
-                self._emit(Decision.RECOVER, f"backing off blocked ({b.kind}) after: {why}", {"kind": b.kind})
+                self._emit(Decision.RECOVER, f"backing off blocked ({b.kind}) after: {why}", RecoverPayload(b.kind))
             return False
 
     def _escape(self, why: str) -> None:
@@ -940,7 +872,7 @@ class RescueBehaviour:
                                           arm_bumper_on_release=True)
                     self._emit(Decision.RECOVER, f"{why}; freed by moving {math.degrees(heading):.0f} deg "
                                                  f"(robot frame){' after turning in place' if turned else ''}",
-                               {"kind": "escape"})
+                               RecoverPayload("escape"))
                     return
                 except Blocked as b:
                     self.contacts[b.kind] += 1
@@ -964,7 +896,7 @@ class RescueBehaviour:
         if faults != self._faults_seen:
             new = sorted(set(faults) - set(self._faults_seen))
             if new:
-                self._emit(Decision.DRIVE_FAULT, f"drive reports fault(s) {', '.join(new)}", {"faults": list(faults)})
+                self._emit(Decision.DRIVE_FAULT, f"drive reports fault(s) {', '.join(new)}", DriveFaultPayload(list(faults)))
             self._faults_seen = faults
         fatal = sorted(set(faults) & set(self.config.fatal_faults))
         if fatal:
@@ -975,7 +907,7 @@ class RescueBehaviour:
     def _finish(self, decision: Decision, reason: str) -> None:
         self._safe_stop()
         self.state = RescueState.DONE
-        self._emit(decision, reason, {"victims": [v.position for v in self.victims]})
+        self._emit(decision, reason, FinishPayload([v.position for v in self.victims]))
 
     def _safe_stop(self) -> Exception | None:
         """Stop the drive; the exception if that failed (logged, never raised)."""
@@ -986,8 +918,8 @@ class RescueBehaviour:
             return exc
         return None
 
-    def _emit(self, decision: Decision, reason: str, data: dict[str, Any] | None = None) -> RescueEvent:
-        ev = RescueEvent(self.clock.now(), self.state, Decision(decision), reason, dict(data or {}))
+    def _emit(self, decision: Decision, reason: str, data: Payload = Payload()) -> RescueEvent:
+        ev = RescueEvent(self.clock.now(), self.state, Decision(decision), reason, data)
         self.events.append(ev)
         self._step_events.append(ev)
         log.info("%s", ev)

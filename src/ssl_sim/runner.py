@@ -50,7 +50,8 @@ from robot.odometry import Odometry, wrap_angle
 from robot.ranging import RangeLayout, ray_ends
 from robot.monitored_audio import MonitoredAudio
 from robot.motion import ContactKind
-from robot.rescue import Decision, FindCriterion, RescueBehaviour, RescueEvent
+from robot.events import ContactPayload, Decision, FindCriterion, RescueEvent
+from robot.rescue import RescueBehaviour
 from robot.vad import ModelError
 from ssl_core.geometry import cube8
 from ssl_core.health import HealthConfig, MicHealth
@@ -299,14 +300,14 @@ class RescueRun:
                 if ev.decision is Decision.TARGET and self.audio.last_array_poses:
                     # Decided right after the listen: the array pose at the end of that block.
                     origin, rot = self.audio.last_array_poses[-1]
-                    self.logger.target(ev.time, origin, rot @ _unit(ev.data["azimuth"], ev.data["elevation"]))
+                    self.logger.target(ev.time, origin, rot @ _unit(ev.data.azimuth, ev.data.elevation))
             if ev.decision is not Decision.VICTIM_FOUND:
                 continue
             _, x, y, _, _ = self._pose_at(ev.time)
-            est = ev.data.get("position", (math.nan, math.nan))
+            est = ev.data.position
             j = self.judge.declare(ev.time, est, (x, y))
-            entry = {"time_s": _r(ev.time, 2), "criterion": ev.data.get("criterion", ""),
-                     "cue": str(ev.data["cue"]) if ev.data.get("cue") is not None else None, "kind": j.kind,
+            entry = {"time_s": _r(ev.time, 2), "criterion": ev.data.criterion, "cue": str(ev.data.cue),
+                     "kind": j.kind,
                      "estimate": [_r(est[0]), _r(est[1])], "robot_position": [_r(x), _r(y)],
                      "victim": self.sources[j.victim].name if j.victim is not None else None,
                      "estimate_error_m": _r(j.report_error_m), "robot_distance_m": _r(j.base_distance_m),
@@ -318,7 +319,7 @@ class RescueRun:
                 self._find_legs.append((j.victim, (x, y), self._path_at(ev.time)))  # unrounded, for SPL
                 if self.logger.enabled:
                     order = sorted(self.found)
-                    h = [ev.data.get("height", 0.1)] * len(order)
+                    h = [ev.data.height] * len(order)
                     est = np.array([[*self.found[k]["estimate"], hk] for k, hk in zip(order, h)], float)
                     self.logger.found(ev.time, est, np.array([self.sources[k].position for k in order]),
                                       [f"{self.sources[k].name} (off {self.found[k]['estimate_error_m']:.2f} m)"
@@ -434,7 +435,7 @@ class RescueRun:
         acou = self.audio.timing["acoustics"]
         loc = self.localizer.seconds
         sim_t = self.robot.time
-        bumps = sum(1 for e in self.events if e.decision is Decision.RECOVER and e.data.get("bumper"))
+        bumps = bumper_recoveries(self.events)
         return {
             "scenario": sc.name, "scenario_file": sc.path, "seed": self.seed, "scene": self.world.name,
             "description": sc.description,
@@ -466,6 +467,11 @@ class RescueRun:
                              "other": _r(loop_s - phys - acou - loc, 3),
                              "per_sim_second": _r(loop_s / max(sim_t, 1e-9), 4), "cpu": self._cpu_split()},
         }
+
+
+def bumper_recoveries(events: list[RescueEvent]) -> int:
+    """Contacts mapped with the bumper pressed (the robot backed off)."""
+    return sum(1 for e in events if isinstance(e.data, ContactPayload) and e.data.bumper)
 
 
 def outcome_counts(behaviour: RescueBehaviour, declarations: list[dict]) -> dict[str, dict[str, int]]:
@@ -587,7 +593,7 @@ def odometry_drift(scenario: Scenario | str | Path, seed: int, duration_s: float
 
     (hf, pf), (hw, pw) = errors(beh.odometry.pose), errors(wheels.pose)   # pf, pw unrounded (m)
     return {"scenario": sc.name, "seed": seed, "sim_time_s": run.robot.time, "cpu_s": time.process_time() - t0,
-            "bumper_recoveries": sum(1 for e in run.events if e.decision is Decision.RECOVER and e.data.get("bumper")),
+            "bumper_recoveries": bumper_recoveries(run.events),
             "range_stops": sum(1 for e in run.events if e.decision is Decision.OBSTACLE),
             "n_found": len(run.found), "heading_error_deg": hf, "position_error_m": pf,
             "wheels_heading_error_deg": hw, "wheels_position_error_m": pw,
