@@ -8,6 +8,7 @@ import pytest
 
 from robot.hal import AudioBlock, AudioSource, DriveStatus, EndOfAudio, ManualClock
 from robot.motion import ContactKind, MotionConfig
+from robot.mount import ArrayMount
 from robot.odometry import Odometry
 from robot.ranging import RangeLayout
 from robot.replay import DryRunDrive
@@ -454,8 +455,9 @@ def test_config_errors_name_the_field():
         RescueConfig(max_victims=0)
     with pytest.raises(ValueError, match="RescueConfig.voice_scan_deg"):
         RescueConfig(voice_scan_deg=-15.0)
-    with pytest.raises(ValueError, match="RescueConfig.mouth_height_m: expected below array_height_m"):
-        RescueConfig(array_height_m=0.08)
+    w = World([])
+    with pytest.raises(ValueError, match=r"RescueConfig.mouth_height_m: expected below the array \(ArrayMount"):
+        make(w, mount=ArrayMount(height_m=0.08))
     w = World([])
     with pytest.raises(ValueError, match="geometry: 8 microphones but the audio source has 4"):
         make(w, audio=FakeAudio(w.clock, n_channels=4), geometry=cube8())

@@ -8,10 +8,11 @@ from robot.coverage import CoverageConfig
 from robot.hal import DriveStatus
 
 from robot.rescue import Decision, RescueConfig
+from robot.mount import ArrayMount
 from robot.sound_map import SoundMap, SoundMapConfig
 from test_rescue import Det, FakeLocalizer, Result, Source, World, WorldDrive, always_speech, found_events, make
 
-H = SoundMapConfig().array_height_m
+H = ArrayMount().height_m
 
 
 class _Ev:

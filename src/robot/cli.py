@@ -83,7 +83,7 @@ def _parser() -> argparse.ArgumentParser:
 _SECTIONS = {"motion": "robot.motion:MotionConfig", "sound_map": "robot.sound_map:SoundMapConfig",
              "planner": "robot.planner:PlannerConfig", "occupancy": "robot.occupancy:OccupancyConfig",
              "gyro": "robot.odometry:GyroFusionConfig", "travel": "robot.odometry:TravelConfig",
-             "coverage": "robot.coverage:CoverageConfig"}
+             "coverage": "robot.coverage:CoverageConfig", "mount": "robot.mount:ArrayMount"}
 
 
 def section_config(section: str) -> type:

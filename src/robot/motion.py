@@ -13,7 +13,7 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, fields
 from enum import StrEnum
-from typing import Callable
+from typing import Callable, ClassVar
 
 import numpy as np
 
@@ -30,7 +30,6 @@ class MotionConfig:
 
     control_dt: float = 0.05               # control loop period while moving (s)
     turn_speed: float = 1.2                # max turn rate (rad/s)
-    turn_tolerance_deg: float = 6.0        # no turn for a heading this close to straight ahead
     drive_speed: float = 0.25              # m/s
     recover_speed: float = 0.15            # m/s while backing off
     backoff_m: float = 0.15                # back-off after a contact
@@ -41,6 +40,10 @@ class MotionConfig:
     range_stop_m: float = 0.12             # a range return this close ahead of the bumper stops a move (a control
     #                                        tick at 0.25 m/s is 0.0125 m; the rest is margin for braking)
     body_radius_m: float = 0.16            # the bumper ring (the corridor a translation sweeps is this wide each side)
+
+    #: Fields that no longer exist (robot.config_values.field_values: ignored with a warning).
+    RETIRED: ClassVar[dict[str, str]] = {
+        "turn_tolerance_deg": "no motion primitive read it: the base translates, it never turns toward a heading"}
 
     def __post_init__(self) -> None:
         for f in fields(self):

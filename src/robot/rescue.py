@@ -8,7 +8,7 @@ One cycle walks the data path, each stage in its own module:
   (position + covariance from bearings triangulated across poses, victim/interferer/unknown, state);
 * **found?** the current target, or any unfound source heard now, is declared found when
   (1) its bearing is steeper than ``found_elevation_deg`` below the horizon (the array is
-  ``array_height_m`` up: at 30 deg a mouth on the floor is ~0.35 m away), or (2) steeper than
+  ``ArrayMount.height_m`` up: at 30 deg a mouth on the floor is ~0.35 m away), or (2) steeper than
   ``corroborated_elevation_deg`` and its level rose ``level_rise_db`` above the faintest listen of it, or
   (3) the map puts it within ``cue_distance_m`` of the robot with a horizontal 1-sigma under
   ``cue_sigma_m``, the bearing now points ``reach_elevation_deg`` down, meets a mouth ``mouth_height_m`` up no
@@ -43,10 +43,10 @@ stopped at the end of every step and on any exception.
 """
 from __future__ import annotations
 
-import dataclasses
 import logging
 import math
 from dataclasses import dataclass, fields
+from typing import ClassVar
 from collections import Counter
 
 import numpy as np
@@ -60,6 +60,7 @@ from robot.coverage import CoverageConfig, ListeningCoverage
 from robot.hal import AudioSource, Clock, DriveBase, DriveStatus, EndOfAudio
 from robot.kinematics import OmniDriveParams
 from robot.listening import ListenEvidence, Listener
+from robot.mount import ArrayMount
 from robot.motion import Blocked, ContactKind, Motion, MotionConfig
 from robot.occupancy import MapMemoryError, OccupancyConfig, OccupancyGrid
 from robot.odometry import GyroFusionConfig, Odometry, TravelConfig, wrap_angle
@@ -93,8 +94,6 @@ class RescueConfig:
     #                                        in closed loop its gains and losses over the shipped scenarios stayed
     #                                        within the runs' chance, and each scan costs 24 beams of VAD
     require_voice: bool = False            # approach only sources classified victim (not unclassified ones)
-    # geometry (shared with the sound map: one source of truth for the array height)
-    array_height_m: float = 0.30           # array centre above the floor
     # found
     found_elevation_deg: float = 30.0      # criterion 1: bearing steeper than this below horizontal
     corroborated_elevation_deg: float = 20.0  # criterion 2: this steep (mouth within ~0.55 m) ...
@@ -174,7 +173,7 @@ class RescueConfig:
     #                                        the robot had triangulated into a ghost, rejected after 11 listens with
     #                                        a caller's rays in it)
     mouth_height_m: float = 0.1            # a caller's mouth above the floor (lying, half buried), for the range a
-    #                                        bearing heard now gives: (array_height_m - this) / tan(depression)
+    #                                        bearing heard now gives: (array height - this) / tan(depression)
     short_estimate_m: float = 0.35         # that range farther than the map estimate by more than this: the estimate
     #                                        is short of her (the listens that placed it came around rubble), no
     #                                        criterion 3 (she is found by a steeper bearing farther on, or the estimate
@@ -186,7 +185,6 @@ class RescueConfig:
     max_victims: int | None = None         # stop after finding this many (None: keep searching)
     # moving
     step_m: float = 0.6                    # longest move between two listens
-    min_step_m: float = 0.1                # checked <= step_m; no decision reads it at present
     wedged_turn_deg: float = 45.0          # turn in place when every escape move stalled without a bumper press
     #                                        (half the 120 deg wheel spacing: each wheel meets the debris anew;
     #                                        measured, light rubble seed 0 ended "stuck" on a 15 mm debris plate)
@@ -195,12 +193,20 @@ class RescueConfig:
     escape_rounds: int = 2                 # rounds of eight escape moves before "stuck" (see _escape)
     fatal_faults: tuple[str, ...] = ("encoder_error",)  # drive faults that end the mission
 
+    #: Fields that no longer exist (robot.config_values.field_values): ignored with a warning, or refused where
+    #: the value now belongs elsewhere (the text says where).
+    RETIRED: ClassVar[dict[str, str]] = {
+        "min_step_m": "no decision read it",
+        "array_height_m": "MOVED: the array's height is robot.mount.ArrayMount.height_m (ssl-robot: --set "
+                          "mount.height_m=...; in simulation the robot model's cube height, set by the simulator)",
+    }
+
     def __post_init__(self) -> None:
         for f in fields(self):
             v = getattr(self, f.name)
             if isinstance(v, float) and not (math.isfinite(v) and v >= 0):
                 raise ValueError(f"RescueConfig.{f.name}: expected a finite number >= 0, got {v}")
-        for name in ("listen_s", "step_m", "min_step_m", "array_height_m", "found_distance_m", "found_sigma_m",
+        for name in ("listen_s", "step_m", "found_distance_m", "found_sigma_m",
                      "cue_distance_m", "cue_sigma_m",
                      "bump_heard_within_s"):
             if not getattr(self, name) > 0:
@@ -211,15 +217,10 @@ class RescueConfig:
             raise ValueError("RescueConfig.found_elevation_deg / corroborated_elevation_deg: expected 0 < deg < 90")
         if not self.reach_elevation_deg < 90:
             raise ValueError(f"RescueConfig.reach_elevation_deg: expected 0 <= deg < 90, got {self.reach_elevation_deg}")
-        if not self.mouth_height_m < self.array_height_m:
-            raise ValueError(f"RescueConfig.mouth_height_m: expected below array_height_m = {self.array_height_m} m, "
-                             f"got {self.mouth_height_m}")
         if not 0 <= self.voice_threshold <= 1:
             raise ValueError(f"RescueConfig.voice_threshold: expected 0..1, got {self.voice_threshold}")
         if not 0 <= self.voice_scan_deg <= 90:
             raise ValueError(f"RescueConfig.voice_scan_deg: expected 0 (off) .. 90 deg, got {self.voice_scan_deg}")
-        if self.min_step_m > self.step_m:
-            raise ValueError(f"RescueConfig.min_step_m: expected <= step_m = {self.step_m}, got {self.min_step_m}")
         if not (isinstance(self.fatal_faults, tuple) and set(self.fatal_faults) <= set(FAULT_NAMES.values())):
             raise ValueError(f"RescueConfig.fatal_faults: expected drive fault names out of "
                              f"{sorted(FAULT_NAMES.values())} (an empty list for none), got {self.fatal_faults!r}")
@@ -259,8 +260,12 @@ class RescueBehaviour:
                  occupancy: OccupancyConfig = OccupancyConfig(), params: OmniDriveParams = OmniDriveParams(),
                  gyro: GyroFusionConfig = GyroFusionConfig(), travel: TravelConfig = TravelConfig(),
                  coverage: CoverageConfig = CoverageConfig(), range_layout: RangeLayout = RangeLayout(),
-                 start_pose=(0.0, 0.0, 0.0), geometry=None, speech=None) -> None:
+                 mount: ArrayMount = ArrayMount(), start_pose=(0.0, 0.0, 0.0), geometry=None, speech=None) -> None:
+        if not config.mouth_height_m < mount.height_m:
+            raise ValueError(f"RescueConfig.mouth_height_m: expected below the array (ArrayMount.height_m = "
+                             f"{mount.height_m} m), got {config.mouth_height_m}")
         self.audio, self.drive, self.clock, self.localizer, self.config = audio, drive, clock, localizer, config
+        self.mount = mount
         geometry = geometry if geometry is not None else getattr(localizer, "geometry", None)
         mics = None if geometry is None else np.asarray(getattr(geometry, "positions", geometry), float)
         if mics is not None and mics.shape[0] != audio.n_channels:
@@ -278,7 +283,7 @@ class RescueBehaviour:
                                  drive=drive)
         if speech is None and mics is not None:
             _ = self.listener.vad   # the model files checked now (robot.vad.ModelError), not at the first listen
-        self.map = SoundMap(dataclasses.replace(sound_map, array_height_m=config.array_height_m))
+        self.map = SoundMap(sound_map, mount)
         self.grid = OccupancyGrid(occupancy, origin=np.asarray(start_pose, float)[:2])
         self.coverage = ListeningCoverage(self.grid.origin, self.grid.n, self.grid.resolution, coverage,
                                           memory_budget_mb=self.grid.coverage_store_mb)
@@ -601,14 +606,14 @@ class RescueBehaviour:
         c, si = math.cos(yaw), math.sin(yaw)
         u = np.asarray(ev.direction, float)
         u = np.array([c * u[0] - si * u[1], si * u[0] + c * u[1], u[2]])
-        v = s.position - np.array([x, y, self.config.array_height_m])
+        v = s.position - np.array([x, y, self.mount.height_m])
         cos = float(u @ v) / max(float(np.linalg.norm(u) * np.linalg.norm(v)), 1e-12)
         return math.degrees(math.acos(max(-1.0, min(1.0, cos))))
 
     def _bearing_range(self, ev: ListenEvidence, height_m: float) -> float:
         """Horizontal range (m) at which a bearing heard now meets the height ``height_m`` (m above the floor,
         below the array); inf for a bearing not pointing below the horizon."""
-        h = self.config.array_height_m - height_m
+        h = self.mount.height_m - height_m
         return h / math.tan(-ev.elevation) if ev.elevation < 0 else math.inf
 
     def _floor_point(self, ev: ListenEvidence) -> np.ndarray:
@@ -888,7 +893,7 @@ class RescueBehaviour:
         """Array-frame azimuth and elevation (rad) of a world point from the current pose."""
         x, y, yaw = self.pose
         dx, dy = position[0] - x, position[1] - y
-        dz = position[2] - self.config.array_height_m
+        dz = position[2] - self.mount.height_m
         return float(wrap_angle(math.atan2(dy, dx) - yaw)), float(math.atan2(dz, math.hypot(dx, dy)))
 
     def _check_faults(self, status: DriveStatus) -> bool:

@@ -49,6 +49,7 @@ import numpy as np
 from robot.odometry import Odometry, wrap_angle
 from robot.ranging import RangeLayout, ray_ends
 from robot.monitored_audio import MonitoredAudio
+from robot.mount import ArrayMount
 from robot.motion import ContactKind
 from robot.events import ContactPayload, Decision, FindCriterion, RescueEvent
 from robot.rescue import RescueBehaviour
@@ -167,8 +168,11 @@ class RescueRun:
         if stages["coverage"].area is None:
             # The search area, as a rescuer's floor plan gives it: the room's floor (world = odometry frame here).
             stages["coverage"] = replace(stages["coverage"], area=(0.0, 0.0, *map(float, world.room.size[:2])))
+        # The behaviour's array height is the simulated robot's: its cube sits at the model's array_height.
+        self.mount = ArrayMount(height_m=robot.config.array_height)
         self.behaviour = RescueBehaviour(self.mic_health, self.drive, self.clock, self.localizer, sc.behaviour,
-                                         params=robot.params, start_pose=world.robot_start, **stages)
+                                         params=robot.params, mount=self.mount, start_pose=world.robot_start,
+                                         **stages)
         self.paths = FreeSpaceGraph(world)
         self.judge = Judge([s.position for s in self.sources[: self.n_victims]], sc.time_limit_s)
         # truth bookkeeping
@@ -458,7 +462,7 @@ class RescueRun:
             "microphone_faults": [{"time_s": _r(t, 2), "state": state, "kind": f.kind, "channels": list(f.channels),
                                    "detail": f.detail} for t, state, f in self.mic_health.history],
             "config": {"behaviour": asdict(sc.behaviour), "localizer": asdict(sc.localizer),
-                       **{k: asdict(v) for k, v in sc.stage_configs().items()},
+                       **{k: asdict(v) for k, v in sc.stage_configs().items()}, "mount": asdict(self.mount),
                        "acoustics": dict(sc.acoustics),
                        "noise": asdict(sc.noise) if sc.noise is not None else None},
             "provenance": provenance(),
