@@ -99,7 +99,7 @@ def _one(path: str, seed: int, time_limit: float | None) -> dict:
             for ev in events:
                 if ev.decision is Decision.VICTIM_FOUND:
                     _, x, y, _, _ = run._pose_at(ev.time)
-                    j = judge.declare(ev.time, ev.data.get("position", (float("nan"),) * 2), (x, y))
+                    j = judge.declare(ev.time, ev.data.position, (x, y))
                     if j.kind == "find":
                         finds.append((j.victim, (x, y), run._path_at(ev.time)))
     finally:

@@ -193,7 +193,7 @@ def test_behaviour_reaches_a_caller_beyond_its_first_window():
     found = [e for e in ev if e.decision is Decision.VICTIM_FOUND]
     assert len(found) == 2
     for c in callers:
-        assert min(math.dist(e.data["position"], c.position[:2]) for e in found) < 0.5
+        assert min(math.dist(e.data.position, c.position[:2]) for e in found) < 0.5
     assert b.grid.offset != (0, 0) and b.coverage.offset == b.grid.offset
 
 

@@ -7,11 +7,13 @@ import numpy as np
 import pytest
 
 from robot.hal import AudioBlock, AudioSource, DriveStatus, EndOfAudio, ManualClock
-from robot.motion import MotionConfig
+from robot.motion import ContactKind, MotionConfig
+from robot.mount import ArrayMount
 from robot.odometry import Odometry
 from robot.ranging import RangeLayout
 from robot.replay import DryRunDrive
-from robot.rescue import Decision, RescueBehaviour, RescueConfig, RescueEvent
+from robot.events import ContactPayload
+from robot.rescue import Decision, FindCriterion, RescueBehaviour, RescueConfig, RescueEvent
 from robot.sound_map import SourceClass, SourceState
 from ssl_core.geometry import cube8
 from sound_dataset import recordings
@@ -192,7 +194,7 @@ def test_maps_a_caller_and_drives_toward_its_estimate():
     assert ev[-1].decision is Decision.DRIVE
     target = ev[1]
     # from one pose the range comes from the elevation: the estimate lies along the true bearing
-    est = np.array(target.data["position"][:2])
+    est = np.array(target.data.position[:2])
     assert abs(math.atan2(est[1], est[0]) - math.atan2(2.0, 2.5)) < math.radians(4)
     x, y, yaw = w.pose()
     assert math.hypot(x, y) == pytest.approx(b.config.step_m, abs=0.05)
@@ -213,12 +215,12 @@ def test_finds_two_callers_once_each_at_their_estimated_positions():
     found = found_events(ev)
     assert len(found) == 2, [str(e) for e in ev if e.decision is not Decision.HEARD]
     for v in victims:
-        assert min(math.dist(e.data["position"], v.position[:2]) for e in found) < 0.3
-    assert len({e.data["source"] for e in found}) == 2
+        assert min(math.dist(e.data.position, v.position[:2]) for e in found) < 0.3
+    assert len({e.data.source for e in found}) == 2
     # after the first find, its calls were heard again and ignored as found
     after = ev[ev.index(found[0]) + 1:]
-    assert any("is found victim #1" in s for e in after if e.decision is Decision.HEARD for s in e.data["ignored"])
-    assert all(e.data["source"] not in {f.data["source"] for f in found[:1]}
+    assert any("is found victim #1" in s for e in after if e.decision is Decision.HEARD for s in e.data.ignored)
+    assert all(e.data.source not in {f.data.source for f in found[:1]}
                for e in after if e.decision is Decision.TARGET)
 
 
@@ -228,14 +230,14 @@ def test_machine_is_never_approached_while_a_caller_is_mapped():
     w = World([machine, caller], seed=6)
     b = make(w, RescueConfig(max_victims=1))
     ev = b.run(max_time=150.0)
-    assert found_events(ev) and math.dist(found_events(ev)[0].data["position"], caller.position[:2]) < 0.3
+    assert found_events(ev) and math.dist(found_events(ev)[0].data.position, caller.position[:2]) < 0.3
     # the machine is mapped as an interferer (in line with the drive its range stays open: its class is the point)
     m_src = [s for s in b.map.sources if s.cls is SourceClass.INTERFERER and s.n_listens >= 3]
     assert m_src
-    targets = {e.data["source"] for e in ev if e.decision is Decision.TARGET}
+    targets = {e.data.source for e in ev if e.decision is Decision.TARGET}
     assert m_src[0].id not in targets
     # and the robot kept its distance from the machine
-    assert min(math.dist(e.data["pose"][:2], machine.position[:2]) for e in ev if e.decision is Decision.HEARD) > 1.0
+    assert min(math.dist(e.data.pose[:2], machine.position[:2]) for e in ev if e.decision is Decision.HEARD) > 1.0
 
 
 def test_machine_alone_is_checked_and_rejected_never_found():
@@ -253,9 +255,9 @@ def test_bump_maps_the_obstacle_and_the_plan_goes_around_it():
     w = World([Source((3.0, 0.0, 0.1), 65.0)], obstacles=wall, seed=1)
     b = make(w, RescueConfig(max_victims=1))
     ev = b.run(max_time=200.0)
-    rec = [e for e in ev if e.decision is Decision.RECOVER and "contact" in e.data]
-    assert rec and rec[0].data["bumper"] and "obstacle mapped" in rec[0].reason
-    assert all(0.9 < c.data["contact"][0] < 1.4 for c in rec[:1])      # mapped where the wall is
+    rec = [e for e in ev if e.decision is Decision.RECOVER and isinstance(e.data, ContactPayload)]
+    assert rec and rec[0].data.bumper and "obstacle mapped" in rec[0].reason
+    assert all(0.9 < c.data.contact[0] < 1.4 for c in rec[:1])      # mapped where the wall is
     assert b.done and ev[-1].decision is Decision.ALL_FOUND
     assert math.dist(b.victims[0].position, (3.0, 0.0)) < 0.3
     assert len(rec) <= 6                    # replanned around it, not pushing along it forever
@@ -287,7 +289,7 @@ def test_bump_at_an_unreachable_caller_counts_as_found():
     ev = b.run(max_time=80.0)
     found = found_events(ev)
     assert len(found) == 1 and "bumped into it" in found[0].reason
-    assert math.dist(found[0].data["position"], (1.6, 0.0)) < 0.3
+    assert math.dist(found[0].data.position, (1.6, 0.0)) < 0.3
 
 
 def test_wheel_stall_triggers_recovery():
@@ -387,12 +389,12 @@ def test_error_event_says_whether_the_drive_stopped():
     w.drive.set_twist = broken
     with pytest.raises(RuntimeError):
         b.step()
-    assert b.events[-1].reason.endswith("; drive stopped") and b.events[-1].data["stopped"]
+    assert b.events[-1].reason.endswith("; drive stopped") and b.events[-1].data.stopped
     w.drive.stop = broken
     with pytest.raises(RuntimeError):
         b.step()
     ev = b.events[-1]
-    assert ev.decision == "error" and not ev.data["stopped"]
+    assert ev.decision == "error" and not ev.data.stopped
     assert "stopping the drive failed too (drive link lost)" in ev.reason and "drive stopped" not in ev.reason
 
 
@@ -439,7 +441,7 @@ def test_keeps_its_target_between_two_intermittent_callers():
     w = World([Source((1.5, 2.6, 0.1), 66.0), Source((1.5, -2.6, 0.1), 65.0)], seed=5)
     b = make(w, RescueConfig(max_victims=1))
     b.run(max_time=60.0)
-    targets = [e.data["source"] for e in b.events if e.decision is Decision.TARGET]
+    targets = [e.data.source for e in b.events if e.decision is Decision.TARGET]
     switches = sum(a != c for a, c in zip(targets[:-1], targets[1:]))
     assert len(targets) >= 3 and switches <= 1
 
@@ -453,8 +455,9 @@ def test_config_errors_name_the_field():
         RescueConfig(max_victims=0)
     with pytest.raises(ValueError, match="RescueConfig.voice_scan_deg"):
         RescueConfig(voice_scan_deg=-15.0)
-    with pytest.raises(ValueError, match="RescueConfig.mouth_height_m: expected below array_height_m"):
-        RescueConfig(array_height_m=0.08)
+    w = World([])
+    with pytest.raises(ValueError, match=r"RescueConfig.mouth_height_m: expected below the array \(ArrayMount"):
+        make(w, mount=ArrayMount(height_m=0.08))
     w = World([])
     with pytest.raises(ValueError, match="geometry: 8 microphones but the audio source has 4"):
         make(w, audio=FakeAudio(w.clock, n_channels=4), geometry=cube8())
@@ -581,7 +584,7 @@ def test_a_caller_who_pauses_at_its_estimate_is_found_not_rejected_as_a_reflecti
     ev = b.run(max_time=120.0)
     assert not [e for e in ev if e.decision is Decision.REJECTED], [str(e) for e in ev]
     found = found_events(ev)
-    assert len(found) == 1 and math.dist(found[0].data["position"], caller.position[:2]) < 0.3
+    assert len(found) == 1 and math.dist(found[0].data.position, caller.position[:2]) < 0.3
 
 
 def test_a_voiced_mouth_right_below_heard_once_is_listened_to_again_not_left():
@@ -596,6 +599,83 @@ def test_a_voiced_mouth_right_below_heard_once_is_listened_to_again_not_left():
     ev += b.step()
     found = found_events(ev)
     assert len(found) == 1 and "steeper than -30 deg" in found[0].reason
-    assert math.dist(found[0].data["position"], caller.position[:2]) < 0.15
+    assert math.dist(found[0].data.position, caller.position[:2]) < 0.15
     assert w.pose() == pytest.approx((0.0, 0.0, 0.0), abs=1e-9)      # it never moved
     assert not any(any(c.twist) for c in w.drive.commands)
+
+
+def test_contacts_and_finds_are_counted_by_kind_in_the_results():
+    # The 2 m wall between robot and caller: the bumper closes on it at least once; every press is a contact
+    # of kind bumper (counted from the drive's own bumper readings, rising edges), the find is a voiced caller
+    # heard steeply from close up, nothing stalls or slips on a flat floor without debris.
+    from ssl_sim.runner import outcome_counts
+    wall = [(1.2, y, 0.12) for y in np.arange(-1.0, 1.01, 0.2)]
+    w = World([Source((3.0, 0.0, 0.1), 65.0)], obstacles=wall, seed=1)
+    presses = []
+    status = w.drive.status
+
+    def watched():
+        st = status()
+        if st.bumper and not (presses and presses[-1]):
+            presses.append(True)
+        elif not st.bumper and presses and presses[-1]:
+            presses.append(False)
+        return st
+
+    w.drive.status = watched
+    b = make(w, RescueConfig(max_victims=1))
+    b.run(max_time=200.0)
+    assert b.done and len(b.victims) == 1
+    n_presses = presses.count(True)
+    assert n_presses >= 1
+    declarations = [{"kind": "find", "cue": v.cue} for v in b.victims]
+    counts = outcome_counts(b, declarations)
+    assert set(counts["contacts_by_kind"]) == {k.value for k in ContactKind}
+    assert counts["contacts_by_kind"]["bumper"] == n_presses
+    assert counts["contacts_by_kind"]["stall"] == counts["contacts_by_kind"]["slip"] == 0
+    assert counts["contacts_by_kind"]["fault"] == 0
+    assert set(counts["finds_by_criterion"]) == {c.value for c in FindCriterion}
+    assert sum(counts["finds_by_criterion"].values()) == 1
+    assert b.victims[0].cue in (FindCriterion.STEEP_BEARING, FindCriterion.LEVEL_RISE)
+    assert counts["finds_by_criterion"][b.victims[0].cue.value] == 1
+    # a declaration scored anything but "find" is not counted
+    assert sum(outcome_counts(b, [{"kind": "false_find", "cue": b.victims[0].cue}])["finds_by_criterion"].values()) == 0
+
+
+#: The keys each decision's data had as a plain dict (log lines, ``ssl-robot --json``): the typed payloads keep them.
+PLAIN_KEYS = {
+    Decision.HEARD: ["n_detections", "candidates", "ignored", "pose"],
+    Decision.TARGET: ["source", "position", "sigma_m", "victim_probability", "azimuth", "elevation", "path_m",
+                      "waypoints"],
+    Decision.DRIVE: ["distance", "goal", "legs"],
+    Decision.VICTIM_FOUND: ["position", "height", "source", "criterion", "cue", "sigma_m", "victim_probability"],
+    Decision.ALL_FOUND: ["victims"],
+}
+CANDIDATE_KEYS = ["source", "azimuth", "elevation", "level_db", "voice", "voice_scan", "class", "state"]
+CONTACT_KEYS = ["bumper", "stalled", "kind", "contact"]
+
+
+def test_event_payloads_keep_their_plain_keys_and_round_trip_through_json():
+    import json
+    wall = [(1.2, y, 0.12) for y in np.arange(-1.0, 1.01, 0.2)]
+    w = World([Source((3.0, 0.0, 0.1), 65.0)], obstacles=wall, seed=1)
+    b = make(w, RescueConfig(max_victims=1))
+    ev = b.run(max_time=200.0)
+    seen = {e.decision for e in ev}
+    assert set(PLAIN_KEYS) <= seen and any(isinstance(e.data, ContactPayload) for e in ev)
+    for e in ev:
+        d = e.data.to_dict()
+        if e.decision in PLAIN_KEYS:
+            assert list(d) == PLAIN_KEYS[e.decision], e.decision
+        if e.decision is Decision.HEARD:
+            assert all(list(c) == CANDIDATE_KEYS for c in d["candidates"])
+            assert [c["source"] for c in d["candidates"]] == [c.source for c in e.data.candidates]
+        if isinstance(e.data, ContactPayload):
+            assert list(d) == CONTACT_KEYS and d["kind"] == "bumper" and d["bumper"] is True
+        assert type(e.data).from_dict(d) == e.data                     # typed -> plain -> typed
+        text = json.loads(json.dumps(d))
+        back = type(e.data).from_dict(text)                          # through a JSON log line
+        assert type(back) is type(e.data) and json.loads(json.dumps(back.to_dict())) == text
+    found = next(e for e in ev if e.decision is Decision.VICTIM_FOUND)
+    assert found.data.to_dict()["cue"] == b.victims[0].cue.value
+    assert tuple(found.data.to_dict()["position"]) == b.victims[0].position

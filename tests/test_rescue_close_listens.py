@@ -8,10 +8,11 @@ from robot.coverage import CoverageConfig
 from robot.hal import DriveStatus
 
 from robot.rescue import Decision, RescueConfig
+from robot.mount import ArrayMount
 from robot.sound_map import SoundMap, SoundMapConfig
 from test_rescue import Det, FakeLocalizer, Result, Source, World, WorldDrive, always_speech, found_events, make
 
-H = SoundMapConfig().array_height_m
+H = ArrayMount().height_m
 
 
 class _Ev:
@@ -130,7 +131,7 @@ def test_an_estimate_heard_level_from_close_up_is_re_estimated_and_the_caller_fo
     assert found
     x, y, _ = w.pose()
     assert math.hypot(x - caller.position[0], y - caller.position[1]) <= 0.75
-    assert math.dist(found[0].data["position"], caller.position[:2]) < 0.3
+    assert math.dist(found[0].data.position, caller.position[:2]) < 0.3
 
 
 def test_wedged_on_debris_turns_in_place_and_moves_on_instead_of_stuck():
@@ -267,6 +268,6 @@ def test_the_floor_image_of_a_machine_above_the_array_is_no_victim():
     pump = Source((0.9, 0.0, 0.36), 75.0, voice=False)
     w = World([pump], seed=8)
     ev = make(w, RescueConfig(max_victims=1), localizer=FloorImageLocalizer(w)).run(max_time=60.0)
-    steep = [e for e in ev if e.decision is Decision.HEARD and min(c["elevation"] for c in e.data["candidates"]) < -0.5]
+    steep = [e for e in ev if e.decision is Decision.HEARD and min(c.elevation for c in e.data.candidates) < -0.5]
     assert len(steep) == 2                       # the image was heard, steep, in both listens
     assert not found_events(ev)

@@ -88,13 +88,15 @@ def test_set_reaches_the_behaviours_other_configs(recording, monkeypatch):
     monkeypatch.setattr(rescue, "RescueBehaviour", Recorded)
     code, _ = run(["--dry-run", "--replay", str(recording), "--max-time", "2", "--set", "travel.loaded_speed=5.0",
                    "--set", "planner.frontier_reach_m=0.8", "--set", "listen_s=0.5",
-                   "--set", "coverage.area=-1,-3,6,3"])
+                   "--set", "coverage.area=-1,-3,6,3", "--set", "mount.height_m=0.25"])
     assert code == 0 and len(made) == 1
     b = made[0]
     assert b.odometry.travel.loaded_speed == 5.0 and b.planner.config.frontier_reach_m == 0.8
     assert b.coverage.config.area == (-1.0, -3.0, 6.0, 3.0) and b.coverage.in_area[b.grid.cell((5.9, 2.9))]
     assert not b.coverage.in_area[b.grid.cell((6.1, 0.0))]
     assert b.config.listen_s == 0.5
+    # the array's height reaches both the behaviour and its sound map (one value for both)
+    assert b.mount.height_m == 0.25 and b.map.mount.height_m == 0.25
 
 
 def test_bad_arguments_are_named(recording, tmp_path, capsys):
@@ -114,6 +116,10 @@ def test_bad_arguments_are_named(recording, tmp_path, capsys):
     assert "loaded_speed" in capsys.readouterr().err
     assert run(["--dry-run", "--replay", str(recording), "--set", "coverage.area=3,0,1,2"])[0] == 2
     assert "--set coverage.area=" in capsys.readouterr().err
+    assert run(["--dry-run", "--replay", str(recording), "--set", "array_height_m=0.3"])[0] == 2
+    assert "array_height_m: no longer a field" in (err := capsys.readouterr().err) and "mount.height_m" in err
+    assert run(["--dry-run", "--replay", str(recording), "--set", "mount.height_m=0"])[0] == 2
+    assert "mount.height_m" in capsys.readouterr().err
     four = tmp_path / "four.wav"
     wavfile.write(four, FS, np.zeros((100, 4), np.int16))
     assert run(["--dry-run", "--replay", str(four)])[0] == 2
@@ -131,7 +137,7 @@ def test_live_audio_path_with_a_fake_sounddevice(monkeypatch):
     sd = _FakeSD(_devices(truth, 523), pace=0.25)  # audio arrives 4x faster than real time
     monkeypatch.setattr(hw, "import_sounddevice", lambda: sd)
     code, text = run(["--dry-run", "--audio", "1,2", "--calibrate", "1.0", "--max-time", "1.5",
-                      "--set", "listen_s=0.5", "--set", "settle_s=0", "--set", "step_m=0.05", "--set", "min_step_m=0.05"])
+                      "--set", "listen_s=0.5", "--set", "settle_s=0", "--set", "step_m=0.05"])
     assert code == 0, text
     assert "device offset: offset 523 samples" in text and "- applied" in text
     heard = next(line for line in text.splitlines() if " heard " in line)

@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import math
+import tomllib
 from pathlib import Path
 
 import numpy as np
@@ -40,13 +41,13 @@ def test_shipped_scenarios_load_and_build():
     dense = load_scenario("dense_pump")
     kinds = [s.kind for s in dense.sources(dense.world())]
     assert kinds == ["victim", "victim", "interferer"]
-    # The behaviour uses the simulated robot's real array height unless the file says otherwise.
-    assert lab.behaviour.array_height_m == pytest.approx(0.27)
 
 
 def test_default_scenario_finds_its_victim(paper_lab_result):
     r = paper_lab_result
     assert r["success"] and r["n_found"] == 1 and r["end_reason"] == "all_found"
+    # The behaviour takes the simulated robot's array height: the MuJoCo cube sits 0.27 m above the floor.
+    assert r["config"]["mount"] == {"height_m": pytest.approx(0.27)}
     v = r["victims"][0]
     assert v["found"] and v["time_s"] <= r["time_limit_s"]
     # Truth: the robot really is next to the caller, and its own estimate of where she lies is close.
@@ -282,3 +283,16 @@ max_rir_s = 0.4
     # The bumper (radius 0.16 m) touches first: the robot centre stops ~0.16 m short of the wall.
     assert run.trajectory[-1][1] == pytest.approx(7.0 - 0.16, abs=0.03)
     assert 1.0 < c["time_s"] < 3.0
+
+
+def test_retired_config_fields_load_with_a_warning_or_say_where_they_went():
+    base = ('name = "old"\ntime_limit_s = 30\n[scene]\nname = "empty_lab"\n[robot]\nstart = [3.0, 3.0, 0.0]\n'
+            '[[victims]]\nposition = [4.0, 3.0, 0.1]\nsound = "continuous"\n')
+    with pytest.warns(FutureWarning, match=r"behaviour.min_step_m: no longer a field"):
+        old = parse_scenario(tomllib.loads(base + "[behaviour]\nmin_step_m = 0.1\nstep_m = 0.5\n"))
+    assert old.behaviour.step_m == 0.5 and not hasattr(old.behaviour, "min_step_m")
+    with pytest.warns(FutureWarning, match=r"motion.turn_tolerance_deg: no longer a field"):
+        parse_scenario(tomllib.loads(base + "[motion]\nturn_tolerance_deg = 6.0\n"))
+    for section in ("behaviour", "sound_map"):
+        with pytest.raises(ScenarioError, match=rf"{section}.array_height_m: no longer a field.*ArrayMount.height_m"):
+            parse_scenario(tomllib.loads(base + f"[{section}]\narray_height_m = 0.3\n"))

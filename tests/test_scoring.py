@@ -12,7 +12,7 @@ import tomllib
 import numpy as np
 import pytest
 
-from robot.rescue import Decision, RescueEvent, RescueState
+from robot.events import Decision, FindCriterion, FoundPayload, RescueEvent, RescueState
 from ssl_sim.envs.evaluation import episode_spl
 from ssl_sim.runner import RescueRun
 from ssl_sim.scenario import ScenarioError, parse_scenario
@@ -32,8 +32,8 @@ def _scenario(victims: list[tuple[float, float]], time_limit_s: float = 60.0):
 
 
 def _declare(run: RescueRun, t: float, xy) -> None:
-    run._handle_events([RescueEvent(t, RescueState.LISTEN, Decision.VICTIM_FOUND, "scripted",
-                                    {"position": (float(xy[0]), float(xy[1]))})])
+    found = FoundPayload((float(xy[0]), float(xy[1])), 0.1, 0, "scripted", FindCriterion.STEEP_BEARING, 0.1, 0.9)
+    run._handle_events([RescueEvent(t, RescueState.LISTEN, Decision.VICTIM_FOUND, "scripted", found)])
 
 
 @pytest.fixture(scope="module")

@@ -4,9 +4,10 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
+from robot.mount import ArrayMount
 from robot.sound_map import SoundMap, SoundMapConfig, SourceClass, SourceState, triangulate
 
-H = SoundMapConfig().array_height_m
+H = ArrayMount().height_m
 SOURCES = np.array([[1.5, 2.0, 0.10], [3.2, -1.6, 0.15], [4.6, 1.1, 0.60]])  # world frame (m)
 VOICE = [0.9, 0.1, 0.8]   # victim, machine, victim
 

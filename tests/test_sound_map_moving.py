@@ -4,9 +4,10 @@ from dataclasses import dataclass
 import numpy as np
 import pytest
 
+from robot.mount import ArrayMount
 from robot.sound_map import SoundMap, SoundMapConfig, pose_at
 
-H = SoundMapConfig().array_height_m
+H = ArrayMount().height_m
 SOURCE = np.array([2.0, 1.5, 0.1])
 
 

@@ -180,6 +180,17 @@ def render() -> str:
                                  f"in the source and no mention in the class docstring: document it there")
             lines.append(f"| `{f.name}` | `{_cell(str(typ))}` | `{_cell(_default(f))}` | {_cell(text)} |")
         lines.append("")
+    retired = [(sec, name, why) for sec, (cls, _) in STAGES.items()
+               for name, why in getattr(cls, "RETIRED", {}).items()]
+    if retired:
+        lines += ["## Retired fields", "",
+                  "Fields older scenario files may still set. One no decision read is ignored with a warning; one whose",
+                  "value now belongs elsewhere is refused with an error saying where.", "",
+                  "| field | on load |", "|---|---|"]
+        for sec, name, why in retired:
+            what = f"error: {why[6:].strip()}" if why.startswith("MOVED:") else f"ignored with a warning ({why})"
+            lines.append(f"| `[{sec}] {name}` | {_cell(what)} |")
+        lines.append("")
     return "\n".join(lines).rstrip("\n") + "\n"
 
 

@@ -53,7 +53,7 @@ def _run(scenario: str, seed: int, time_limit: float | None) -> dict:
             "false_found": len(res["false_finds"]), "end": res["sim_time_s"], "victims": res["victims"],
             "callers": [tuple(s.position[:2]) for s in run.sources[:run.n_victims]],
             "radius": FIND_BASE_RADIUS_M, "t": traj[:, 0], "xy": traj[:, 1:], "cum": np.array(run.cum_path),
-            "events": [(e.time, e.decision.value, e.reason, dict(e.data)) for e in run.events],
+            "events": [(e.time, e.decision.value, e.reason, e.data.to_dict()) for e in run.events],
             "cpu_s": time.process_time() - t0}
 
 

@@ -83,7 +83,7 @@ def _parser() -> argparse.ArgumentParser:
 _SECTIONS = {"motion": "robot.motion:MotionConfig", "sound_map": "robot.sound_map:SoundMapConfig",
              "planner": "robot.planner:PlannerConfig", "occupancy": "robot.occupancy:OccupancyConfig",
              "gyro": "robot.odometry:GyroFusionConfig", "travel": "robot.odometry:TravelConfig",
-             "coverage": "robot.coverage:CoverageConfig"}
+             "coverage": "robot.coverage:CoverageConfig", "mount": "robot.mount:ArrayMount"}
 
 
 def section_config(section: str) -> type:
@@ -238,7 +238,7 @@ def _stop(drive) -> str:
 
 def _print_event(e: RescueEvent, as_json: bool, out) -> None:
     if as_json:
-        data = {k: v for k, v in e.data.items() if k != "candidates"}
+        data = {k: v for k, v in e.data.to_dict().items() if k != "candidates"}
         print(json.dumps({"time": round(e.time, 3), "state": e.state.value, "decision": e.decision,
                           "reason": e.reason, "data": data}, default=_jsonable), file=out, flush=True)
     else:

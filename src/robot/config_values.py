@@ -13,6 +13,7 @@ import dataclasses
 import math
 import types
 import typing
+import warnings
 from typing import Any
 
 _NAMES = {int: "an integer", float: "a number", str: "a string", bool: "true/false"}
@@ -74,11 +75,30 @@ def field_values(cls, values: dict[str, Any], what: str, text: bool = False, sep
     """``values`` (field name -> value) checked against dataclass ``cls``'s init fields; unknown names are
     refused. Returns keyword arguments for ``cls``; names in errors read ``what`` + ``sep`` + field."""
     known = {f.name for f in dataclasses.fields(cls) if f.init}
+    values = _without_retired(cls, values, what, sep)
     unknown = sorted(set(values) - known)
     if unknown:
         raise ValueError(f"{what}: unknown key(s) {unknown}; expected some of {sorted(known)}")
     hints = typing.get_type_hints(cls)
     return {k: coerce(v, hints[k], f"{what}{sep}{k}", text) for k, v in values.items()}
+
+
+def _without_retired(cls, values: dict[str, Any], what: str, sep: str) -> dict[str, Any]:
+    """``values`` without the fields ``cls`` retired (its ``RETIRED``: name -> why): a field whose value moved
+    elsewhere (the text starts "MOVED:") is refused with where it went; one no decision read is ignored with a
+    ``FutureWarning``, so that old scenario files still load."""
+    retired = getattr(cls, "RETIRED", {})
+    kept = {}
+    for k, v in values.items():
+        why = retired.get(k)
+        if why is None:
+            kept[k] = v
+        elif why.startswith("MOVED:"):
+            raise ValueError(f"{what}{sep}{k}: no longer a field of this section; {why[6:].strip()}")
+        else:
+            warnings.warn(f"{what}{sep}{k}: no longer a field ({why}); the value is ignored", FutureWarning,
+                          stacklevel=3)
+    return kept
 
 
 def need(config: Any, ok: bool, name: str, expected: str) -> None:

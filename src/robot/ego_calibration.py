@@ -17,6 +17,7 @@ import numpy as np
 
 from robot.hal import AudioSource, Clock, DriveBase, as_float_audio
 from robot.kinematics import OmniDriveParams
+from robot.mount import ArrayMount
 from ssl_core.ego_noise import EgoNoiseConfig, EgoNoiseTemplate
 from ssl_core.geometry import ArrayGeometry
 
@@ -30,33 +31,34 @@ DEFAULT_SPEEDS = tuple(float(v) for v in np.round(0.75 * 1.25 ** np.arange(15), 
 class MotorMount:
     """Motor positions relative to the array (m, robot frame = array frame: the cube is mounted level and
     aligned with the chassis). ``motor_radius_m``: motor centres from the robot's vertical axis;
-    ``motor_height_m``: their axle height above the floor (the wheel radius); ``array_height_m``: the cube's
-    centre above the floor."""
+    ``motor_height_m``: their axle height above the floor (the wheel radius); ``array``: the cube's mounting
+    (its centre 0.27 m above the floor on the built robot)."""
 
     drive: OmniDriveParams = field(default_factory=OmniDriveParams)
     motor_radius_m: float = 0.0679
     motor_height_m: float = 0.05
-    array_height_m: float = 0.27
+    array: ArrayMount = ArrayMount(height_m=0.27)
 
     def __post_init__(self) -> None:
-        for name in ("motor_radius_m", "motor_height_m", "array_height_m"):
+        for name in ("motor_radius_m", "motor_height_m"):
             v = getattr(self, name)
             if not (np.isfinite(v) and v >= 0):
                 raise ValueError(f"MotorMount.{name}: expected a finite length >= 0 m, got {v!r}")
-        if not self.motor_height_m < self.array_height_m:
-            raise ValueError(f"MotorMount.motor_height_m: expected below array_height_m = {self.array_height_m} m")
+        if not self.motor_height_m < self.array.height_m:
+            raise ValueError(f"MotorMount.motor_height_m: expected below the array (height_m = "
+                             f"{self.array.height_m} m)")
 
     def motor_positions(self) -> np.ndarray:
         """(3, 3) motor centres in the array frame (m), wheel order of ``robot.kinematics``."""
         th = np.asarray(self.drive.wheel_angles, float)
         r = self.motor_radius_m
-        return np.stack([r * np.cos(th), r * np.sin(th), np.full(3, self.motor_height_m - self.array_height_m)],
+        return np.stack([r * np.cos(th), r * np.sin(th), np.full(3, self.motor_height_m - self.array.height_m)],
                         axis=1)
 
     def suppression_config(self, **kw) -> EgoNoiseConfig:
         """``ssl_core.ego_noise.EgoNoiseConfig`` for these motors (floor images included); ``kw`` overrides."""
         return EgoNoiseConfig(motor_positions=tuple(map(tuple, self.motor_positions())),
-                              floor_below_m=self.array_height_m, **kw)
+                              floor_below_m=self.array.height_m, **kw)
 
 
 def calibrate_ego_noise(drive: DriveBase, audio: AudioSource, clock: Clock, speeds=DEFAULT_SPEEDS,

@@ -12,7 +12,8 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass, fields
-from typing import Callable
+from enum import StrEnum
+from typing import Callable, ClassVar
 
 import numpy as np
 
@@ -20,7 +21,7 @@ from robot.hal import Clock, DriveBase, DriveStatus
 from robot.odometry import Odometry
 from robot.ranging import RangeLayout
 
-__all__ = ["MotionConfig", "Blocked", "Motion", "StallWatch"]
+__all__ = ["MotionConfig", "ContactKind", "Blocked", "Motion", "StallWatch"]
 
 
 @dataclass(frozen=True)
@@ -29,7 +30,6 @@ class MotionConfig:
 
     control_dt: float = 0.05               # control loop period while moving (s)
     turn_speed: float = 1.2                # max turn rate (rad/s)
-    turn_tolerance_deg: float = 6.0        # no turn for a heading this close to straight ahead
     drive_speed: float = 0.25              # m/s
     recover_speed: float = 0.15            # m/s while backing off
     backoff_m: float = 0.15                # back-off after a contact
@@ -41,6 +41,10 @@ class MotionConfig:
     #                                        tick at 0.25 m/s is 0.0125 m; the rest is margin for braking)
     body_radius_m: float = 0.16            # the bumper ring (the corridor a translation sweeps is this wide each side)
 
+    #: Fields that no longer exist (robot.config_values.field_values: ignored with a warning).
+    RETIRED: ClassVar[dict[str, str]] = {
+        "turn_tolerance_deg": "no motion primitive read it: the base translates, it never turns toward a heading"}
+
     def __post_init__(self) -> None:
         for f in fields(self):
             v = getattr(self, f.name)
@@ -48,11 +52,22 @@ class MotionConfig:
                 raise ValueError(f"MotionConfig.{f.name}={v!r}: expected a finite number > 0")
 
 
-class Blocked(Exception):
-    """A move ended early: ``kind`` is "bumper", "stall", "slip", "range" or "fault"; ``heading`` the direction of
-    the attempted motion in the odometry frame (rad) for mapping the contact."""
+class ContactKind(StrEnum):
+    """Why a move ended early; the value is its keyword in logs, the occupancy grid and ``results.json``."""
 
-    def __init__(self, kind: str, status: DriveStatus, heading: float = 0.0) -> None:
+    BUMPER = "bumper"   # the bumper ring touched something
+    STALL = "stall"     # the drive's stall flag, or too little odometry progress for the command (StallWatch)
+    SLIP = "slip"       # the gyro disagrees with the wheels for slip_intervals readings in a row
+    RANGE = "range"     # a range return inside the swept corridor ahead (no touch: stopped before it)
+    FAULT = "fault"     # a fatal drive fault (no contact: the mission ends)
+
+
+class Blocked(Exception):
+    """A move ended early: ``kind`` says why (``ContactKind``); ``heading`` the direction of the attempted motion
+    in the odometry frame (rad) for mapping the contact."""
+
+    def __init__(self, kind: ContactKind | str, status: DriveStatus, heading: float = 0.0) -> None:
+        kind = ContactKind(kind)   # a name outside ContactKind raises ValueError here
         super().__init__(kind)
         self.kind, self.status, self.heading = kind, status, heading
 
@@ -141,15 +156,15 @@ class Motion:
         st = self.status()
         kind = None
         if self.fatal(st):
-            kind = "fault"
+            kind = ContactKind.FAULT
         elif st.bumper and bumper_armed:
-            kind = "bumper"
+            kind = ContactKind.BUMPER
         elif st.stalled:
-            kind = "stall"
+            kind = ContactKind.STALL
         elif self._slips >= self.config.slip_intervals:
-            kind = "slip"
+            kind = ContactKind.SLIP
         elif way is not None and self._in_the_way(st, way[0], min(way[1], self.config.range_stop_m)):
-            kind = "range"
+            kind = ContactKind.RANGE
         if kind is not None:
             self.stop()
             self.update_odometry()
@@ -179,7 +194,7 @@ class Motion:
                 self._check(True, yaw)
                 if watch.stalled(self.clock.now(), float(self._tick_odometry()[2]), abs(omega)):
                     self.stop()
-                    raise Blocked("stall", DriveStatus(stalled=True), yaw)
+                    raise Blocked(ContactKind.STALL, DriveStatus(stalled=True), yaw)
         finally:
             self.stop()
         self.update_odometry()
@@ -215,7 +230,7 @@ class Motion:
                 x, y, _ = self._tick_odometry()
                 if watch.stalled(self.clock.now(), (x - x0) * ux + (y - y0) * uy, v):
                     self.stop()
-                    raise Blocked("stall", DriveStatus(stalled=True), world_heading)
+                    raise Blocked(ContactKind.STALL, DriveStatus(stalled=True), world_heading)
         finally:
             self.stop()
         self.update_odometry()

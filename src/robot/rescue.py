@@ -8,7 +8,7 @@ One cycle walks the data path, each stage in its own module:
   (position + covariance from bearings triangulated across poses, victim/interferer/unknown, state);
 * **found?** the current target, or any unfound source heard now, is declared found when
   (1) its bearing is steeper than ``found_elevation_deg`` below the horizon (the array is
-  ``array_height_m`` up: at 30 deg a mouth on the floor is ~0.35 m away), or (2) steeper than
+  ``ArrayMount.height_m`` up: at 30 deg a mouth on the floor is ~0.35 m away), or (2) steeper than
   ``corroborated_elevation_deg`` and its level rose ``level_rise_db`` above the faintest listen of it, or
   (3) the map puts it within ``cue_distance_m`` of the robot with a horizontal 1-sigma under
   ``cue_sigma_m``, the bearing now points ``reach_elevation_deg`` down, meets a mouth ``mouth_height_m`` up no
@@ -43,20 +43,25 @@ stopped at the end of every step and on any exception.
 """
 from __future__ import annotations
 
-import dataclasses
 import logging
 import math
-from dataclasses import dataclass, field, fields
-from enum import Enum
-from typing import Any
+from dataclasses import dataclass, fields
+from typing import ClassVar
+from collections import Counter
 
 import numpy as np
 
+# The behaviour's vocabulary (robot.events), importable from here too.
+from robot.events import (FINAL, ContactPayload, Decision, DriveFaultPayload, DrivePayload, ErrorPayload,
+                          FindCriterion, FinishPayload, FoundPayload, HeardCandidate, HeardPayload, ObstaclePayload,
+                          Payload, RecoverPayload, RejectedPayload, RescueEvent, RescueState, SourcePayload,
+                          TargetPayload, TimeUpPayload)
 from robot.coverage import CoverageConfig, ListeningCoverage
 from robot.hal import AudioSource, Clock, DriveBase, DriveStatus, EndOfAudio
 from robot.kinematics import OmniDriveParams
 from robot.listening import ListenEvidence, Listener
-from robot.motion import Blocked, Motion, MotionConfig
+from robot.mount import ArrayMount
+from robot.motion import Blocked, ContactKind, Motion, MotionConfig
 from robot.occupancy import MapMemoryError, OccupancyConfig, OccupancyGrid
 from robot.odometry import GyroFusionConfig, Odometry, TravelConfig, wrap_angle
 from robot.planner import Plan, Planner, PlannerConfig
@@ -69,48 +74,6 @@ log = logging.getLogger(__name__)
 #: Range readings go into the grid once per 5 cm of travel or 10 deg of turn (control ticks are 1.25 cm apart).
 SCAN_SPACING_M = 0.05
 SCAN_TURN = math.radians(10.0)
-
-
-class RescueState(str, Enum):
-    """Phase of the behaviour (the state an event was decided in)."""
-
-    LISTEN = "listen"          # standing, listening, deciding
-    APPROACH = "approach"      # moving toward the target
-    FOUND = "found"            # a victim was just declared found
-    RECOVER = "recover"        # backing off after a contact
-    EXPLORE = "explore"        # moving without a target
-    DONE = "done"              # finished: max victims, stuck, audio ended, fatal fault
-
-
-class Decision(str, Enum):
-    """What an event says; the value is its keyword in logs and ``results.json``."""
-
-    HEARD = "heard"                # data: n_detections, candidates [{source, azimuth, elevation, level_db,
-    #                                voice}], ignored, pose
-    NO_SOURCE = "no_source"        # data: same as HEARD
-    TARGET = "target"              # data: source, position (x, y, z), sigma_m, victim_probability, azimuth,
-    #                                elevation (array frame, toward the estimate), path_m, waypoints
-    NO_TARGET = "no_target"
-    DRIVE = "drive"                # data: distance, heading (robot frame), goal (world x, y)
-    EXPLORE = "explore"            # data: distance, heading, goal
-    VICTIM_FOUND = "victim_found"  # data: position (x, y) estimated, height, source, criterion, sigma_m
-    REJECTED = "rejected"          # an interferer reached and still without voice: data source, position
-    RECOVER = "recover"            # data: bumper, stalled, kind, contact (world x, y)
-    OBSTACLE = "obstacle"          # a move stopped before a range return in its way; data: ranges (m, per sensor)
-    DRIVE_FAULT = "drive_fault"    # data: faults
-    ALL_FOUND = "all_found"        # data: victims
-    STUCK = "stuck"
-    FAULT = "fault"
-    AUDIO_ENDED = "audio_ended"
-    TIME_UP = "time_up"
-    ERROR = "error"                # data: exception
-
-    def __str__(self) -> str:
-        return self.value
-
-
-#: Decisions that end the mission.
-FINAL = frozenset({Decision.ALL_FOUND, Decision.STUCK, Decision.FAULT, Decision.AUDIO_ENDED})
 
 
 @dataclass(frozen=True)
@@ -131,8 +94,6 @@ class RescueConfig:
     #                                        in closed loop its gains and losses over the shipped scenarios stayed
     #                                        within the runs' chance, and each scan costs 24 beams of VAD
     require_voice: bool = False            # approach only sources classified victim (not unclassified ones)
-    # geometry (shared with the sound map: one source of truth for the array height)
-    array_height_m: float = 0.30           # array centre above the floor
     # found
     found_elevation_deg: float = 30.0      # criterion 1: bearing steeper than this below horizontal
     corroborated_elevation_deg: float = 20.0  # criterion 2: this steep (mouth within ~0.55 m) ...
@@ -212,7 +173,7 @@ class RescueConfig:
     #                                        the robot had triangulated into a ghost, rejected after 11 listens with
     #                                        a caller's rays in it)
     mouth_height_m: float = 0.1            # a caller's mouth above the floor (lying, half buried), for the range a
-    #                                        bearing heard now gives: (array_height_m - this) / tan(depression)
+    #                                        bearing heard now gives: (array height - this) / tan(depression)
     short_estimate_m: float = 0.35         # that range farther than the map estimate by more than this: the estimate
     #                                        is short of her (the listens that placed it came around rubble), no
     #                                        criterion 3 (she is found by a steeper bearing farther on, or the estimate
@@ -224,7 +185,6 @@ class RescueConfig:
     max_victims: int | None = None         # stop after finding this many (None: keep searching)
     # moving
     step_m: float = 0.6                    # longest move between two listens
-    min_step_m: float = 0.1                # checked <= step_m; no decision reads it at present
     wedged_turn_deg: float = 45.0          # turn in place when every escape move stalled without a bumper press
     #                                        (half the 120 deg wheel spacing: each wheel meets the debris anew;
     #                                        measured, light rubble seed 0 ended "stuck" on a 15 mm debris plate)
@@ -233,12 +193,20 @@ class RescueConfig:
     escape_rounds: int = 2                 # rounds of eight escape moves before "stuck" (see _escape)
     fatal_faults: tuple[str, ...] = ("encoder_error",)  # drive faults that end the mission
 
+    #: Fields that no longer exist (robot.config_values.field_values): ignored with a warning, or refused where
+    #: the value now belongs elsewhere (the text says where).
+    RETIRED: ClassVar[dict[str, str]] = {
+        "min_step_m": "no decision read it",
+        "array_height_m": "MOVED: the array's height is robot.mount.ArrayMount.height_m (ssl-robot: --set "
+                          "mount.height_m=...; in simulation the robot model's cube height, set by the simulator)",
+    }
+
     def __post_init__(self) -> None:
         for f in fields(self):
             v = getattr(self, f.name)
             if isinstance(v, float) and not (math.isfinite(v) and v >= 0):
                 raise ValueError(f"RescueConfig.{f.name}: expected a finite number >= 0, got {v}")
-        for name in ("listen_s", "step_m", "min_step_m", "array_height_m", "found_distance_m", "found_sigma_m",
+        for name in ("listen_s", "step_m", "found_distance_m", "found_sigma_m",
                      "cue_distance_m", "cue_sigma_m",
                      "bump_heard_within_s"):
             if not getattr(self, name) > 0:
@@ -249,15 +217,10 @@ class RescueConfig:
             raise ValueError("RescueConfig.found_elevation_deg / corroborated_elevation_deg: expected 0 < deg < 90")
         if not self.reach_elevation_deg < 90:
             raise ValueError(f"RescueConfig.reach_elevation_deg: expected 0 <= deg < 90, got {self.reach_elevation_deg}")
-        if not self.mouth_height_m < self.array_height_m:
-            raise ValueError(f"RescueConfig.mouth_height_m: expected below array_height_m = {self.array_height_m} m, "
-                             f"got {self.mouth_height_m}")
         if not 0 <= self.voice_threshold <= 1:
             raise ValueError(f"RescueConfig.voice_threshold: expected 0..1, got {self.voice_threshold}")
         if not 0 <= self.voice_scan_deg <= 90:
             raise ValueError(f"RescueConfig.voice_scan_deg: expected 0 (off) .. 90 deg, got {self.voice_scan_deg}")
-        if self.min_step_m > self.step_m:
-            raise ValueError(f"RescueConfig.min_step_m: expected <= step_m = {self.step_m}, got {self.min_step_m}")
         if not (isinstance(self.fatal_faults, tuple) and set(self.fatal_faults) <= set(FAULT_NAMES.values())):
             raise ValueError(f"RescueConfig.fatal_faults: expected drive fault names out of "
                              f"{sorted(FAULT_NAMES.values())} (an empty list for none), got {self.fatal_faults!r}")
@@ -270,30 +233,16 @@ class RescueConfig:
 
 
 @dataclass(frozen=True)
-class RescueEvent:
-    """One decision: ``time`` (s, clock), the ``state`` it was taken in, the ``decision``,
-    a human-readable ``reason`` and machine-readable ``data`` (SI units, angles in rad)."""
-
-    time: float
-    state: RescueState
-    decision: Decision
-    reason: str
-    data: dict[str, Any] = field(default_factory=dict)
-
-    def __str__(self) -> str:
-        return f"[{self.time:8.2f} s] {self.state.value:<8} {self.decision.value:<13} {self.reason}"
-
-
-@dataclass(frozen=True)
 class FoundVictim:
     """A victim declared found: the map's estimated ``position`` (x, y) and ``height`` (m) in the odometry frame."""
 
     position: tuple[float, float]
     time: float
-    criterion: str
+    criterion: str            # the cue in words, with the measured values
     height: float
     voice: float = 0.0        # P(victim) of the map source when declared
     source_id: int = -1
+    cue: FindCriterion | None = None   # which cue (None: declared by a caller of ``_declare_found`` without one)
 
 
 class RescueBehaviour:
@@ -311,8 +260,12 @@ class RescueBehaviour:
                  occupancy: OccupancyConfig = OccupancyConfig(), params: OmniDriveParams = OmniDriveParams(),
                  gyro: GyroFusionConfig = GyroFusionConfig(), travel: TravelConfig = TravelConfig(),
                  coverage: CoverageConfig = CoverageConfig(), range_layout: RangeLayout = RangeLayout(),
-                 start_pose=(0.0, 0.0, 0.0), geometry=None, speech=None) -> None:
+                 mount: ArrayMount = ArrayMount(), start_pose=(0.0, 0.0, 0.0), geometry=None, speech=None) -> None:
+        if not config.mouth_height_m < mount.height_m:
+            raise ValueError(f"RescueConfig.mouth_height_m: expected below the array (ArrayMount.height_m = "
+                             f"{mount.height_m} m), got {config.mouth_height_m}")
         self.audio, self.drive, self.clock, self.localizer, self.config = audio, drive, clock, localizer, config
+        self.mount = mount
         geometry = geometry if geometry is not None else getattr(localizer, "geometry", None)
         mics = None if geometry is None else np.asarray(getattr(geometry, "positions", geometry), float)
         if mics is not None and mics.shape[0] != audio.n_channels:
@@ -330,7 +283,7 @@ class RescueBehaviour:
                                  drive=drive)
         if speech is None and mics is not None:
             _ = self.listener.vad   # the model files checked now (robot.vad.ModelError), not at the first listen
-        self.map = SoundMap(dataclasses.replace(sound_map, array_height_m=config.array_height_m))
+        self.map = SoundMap(sound_map, mount)
         self.grid = OccupancyGrid(occupancy, origin=np.asarray(start_pose, float)[:2])
         self.coverage = ListeningCoverage(self.grid.origin, self.grid.n, self.grid.resolution, coverage,
                                           memory_budget_mb=self.grid.coverage_store_mb)
@@ -347,9 +300,10 @@ class RescueBehaviour:
         self._restarted: set[int] = set()         # sources re-estimated from the listens at their old estimate
         self._evidence: list[ListenEvidence] = []  # every bearing heard from the current spot (robot frame)
         self._evidence_at: np.ndarray | None = None  # that spot (world x, y) and the yaw (rad) at it
-        self._cue: dict[int, tuple[str, bool]] = {}   # the found cue a source showed in an earlier listen (and
-        #                                                whether it was a steep bearing)
+        self._cue: dict[int, tuple[str, FindCriterion]] = {}   # the found cue a source showed in an earlier
+        #                                                         listen (words, kind)
         self._target_contacts: dict[int, int] = {}
+        self.contacts: Counter[ContactKind] = Counter()   # every move that ended early, by why (results.json)
         self._baseline_steps: dict[int, int] = {}
         self._side = 1.0                          # alternating side of baseline steps
         self._faults_seen: tuple[str, ...] = ()
@@ -379,7 +333,7 @@ class RescueBehaviour:
             failed = self._safe_stop()
             outcome = "drive stopped" if failed is None else f"stopping the drive failed too ({failed})"
             self._emit(Decision.ERROR, f"{type(exc).__name__}: {exc}; {outcome}",
-                       {"exception": type(exc).__name__, "stopped": failed is None})
+                       ErrorPayload(type(exc).__name__, failed is None))
             raise
         finally:
             self._safe_stop()
@@ -396,7 +350,7 @@ class RescueBehaviour:
                 out += self.step()
             if not self.done:
                 self._step_events = []
-                self._emit(Decision.TIME_UP, f"mission time of {max_time:g} s used up", {"max_time": max_time})
+                self._emit(Decision.TIME_UP, f"mission time of {max_time:g} s used up", TimeUpPayload(max_time))
                 out += self._step_events
         finally:
             self._safe_stop()
@@ -415,8 +369,9 @@ class RescueBehaviour:
         if self._check_faults(status):
             return
         if status.bumper or status.stalled:
-            self._recover(Blocked("bumper" if status.bumper else "stall", status, float(self.pose[2])),
-                          "at the start of a cycle")
+            b = Blocked(ContactKind.BUMPER if status.bumper else ContactKind.STALL, status, float(self.pose[2]))
+            self.contacts[b.kind] += 1
+            self._recover(b, "at the start of a cycle")
             return
         self.motion.stop()
         heard = self._listen()
@@ -437,11 +392,9 @@ class RescueBehaviour:
         self.target, self.plan = src.id, plan
         self.map.set_state(src.id, SourceState.APPROACHING)
         az, el = self._bearing_to(src.position)
-        self._emit(Decision.TARGET, why, {"source": src.id, "position": src.position.tolist(),
-                                          "sigma_m": src.horizontal_sigma_m,
-                                          "victim_probability": src.victim_probability, "azimuth": az,
-                                          "elevation": el, "path_m": plan.length,
-                                          "waypoints": plan.waypoints.tolist()})
+        self._emit(Decision.TARGET, why, TargetPayload(src.id, src.position.tolist(), src.horizontal_sigma_m,
+                                                       src.victim_probability, az, el, plan.length,
+                                                       plan.waypoints.tolist()))
         self._follow(plan, RescueState.APPROACH, Decision.DRIVE, src)
 
     def _keep_on_map(self) -> bool:
@@ -483,20 +436,19 @@ class RescueBehaviour:
         ignored = list(res.ignored)
         for ev, sid in assoc:
             s = self.map.source(sid)
-            row = {"source": sid, "azimuth": ev.azimuth, "elevation": ev.elevation, "level_db": ev.level_db,
-                   "voice": ev.speech_fraction, "voice_scan": ev.voice_scan, "class": s.cls.value,
-                   "state": s.state.value}
+            row = HeardCandidate(sid, ev.azimuth, ev.elevation, ev.level_db, ev.speech_fraction, ev.voice_scan,
+                                 s.cls.value, s.state.value)
             if s.state is SourceState.FOUND:
                 ignored.append(f"az {math.degrees(ev.azimuth):+.0f} deg el {math.degrees(ev.elevation):+.0f} deg "
                                f"is found victim #{self._victim_number(sid)}")
             else:
                 cands.append(row)
-        data = {"n_detections": res.n_detections, "candidates": cands, "ignored": ignored, "pose": pose.tolist()}
+        data = HeardPayload(res.n_detections, cands, ignored, pose.tolist())
         if cands:
             self._silent = 0
-            desc = "; ".join(f"#{c['source']} {c['class']} az {math.degrees(c['azimuth']):+.0f} deg "
-                             f"el {math.degrees(c['elevation']):+.0f} deg voice {c['voice']:.2f}"
-                             + (" (voice scan)" if c["voice_scan"] else "") for c in cands)
+            desc = "; ".join(f"#{c.source} {c.cls} az {math.degrees(c.azimuth):+.0f} deg "
+                             f"el {math.degrees(c.elevation):+.0f} deg voice {c.voice:.2f}"
+                             + (" (voice scan)" if c.voice_scan else "") for c in cands)
             self._emit(Decision.HEARD, desc + (f"; ignored: {'; '.join(ignored)}" if ignored else ""), data)
         else:
             self._silent += 1
@@ -517,7 +469,7 @@ class RescueBehaviour:
                 continue
             if s.state in (SourceState.FOUND, SourceState.REJECTED) or self._near_found(s.position, s.id):
                 continue
-            crit, steep_cue = None, False
+            crit, cue = None, None
             ev = heard_by.get(sid)
             # Beside a machine checked from close up only a voice makes a victim: its reflections off nearby
             # rubble arrive steep and loud (dense_pump: a -41 deg bearing 0.4 m from the pump).
@@ -533,11 +485,11 @@ class RescueBehaviour:
                 rise = ev.level_db - faintest
                 if steep >= cfg.found_elevation_deg:
                     crit = f"elevation {-steep:.0f} deg is steeper than -{cfg.found_elevation_deg:g} deg"
-                    steep_cue = True
+                    cue = FindCriterion.STEEP_BEARING
                 elif steep >= cfg.corroborated_elevation_deg and rise >= cfg.level_rise_db:
                     crit = (f"elevation {-steep:.0f} deg (< -{cfg.corroborated_elevation_deg:g}) and level rose "
                             f"{rise:.1f} dB (>= {cfg.level_rise_db:g})")
-                    steep_cue = True
+                    cue = FindCriterion.LEVEL_RISE
             # A voiced mouth right below in a bearing that began a source of its own (the caller's map estimate
             # was off): criteria 1-2 need a second listen of it, so take it here rather than step away across
             # the bearing (measured, dense_pump seed 11: heard -35 deg down 0.33 m from her, then left).
@@ -556,18 +508,20 @@ class RescueBehaviour:
                     and ev.level_db - min(r.level_db for r in s.history) >= cfg.supporting_rise_db:
                 crit = (f"map estimate {d:.2f} m away (<= {cfg.cue_distance_m:g}), +- "
                         f"{s.horizontal_sigma_m:.2f} m from {s.n_inliers} listens")
+                cue = FindCriterion.MAP_ESTIMATE
             reached = d <= cfg.found_distance_m and s.horizontal_sigma_m <= cfg.found_sigma_m and s.triangulated
             if crit is not None:
                 crit += f" (SRP power {ev.power:.2f})"
-                self._cue[sid] = (crit, steep_cue)
+                self._cue[sid] = (crit, cue)
             elif reached and sid in self._cue:
                 # It showed a found cue from here before and is silent now: a caller pauses (measured, light rubble
                 # seed 7: the caller behind the pillar heard steep and 10-18 dB louder in three listens, then
                 # rejected as a reflection on the fourth, in which it did not call).
-                earlier, steep_cue = self._cue[sid]
+                earlier, cue = self._cue[sid]
                 crit = f"{earlier}, in an earlier listen; map estimate {d:.2f} m away"
             if crit is None and reached and not self._approachable(s):
-                crit = f"map estimate {d:.2f} m away, +- {s.horizontal_sigma_m:.2f} m"   # a machine: no elevation cue
+                # A machine: no elevation cue. Never declared (not approachable: rejected below).
+                crit, cue = f"map estimate {d:.2f} m away, +- {s.horizontal_sigma_m:.2f} m", FindCriterion.MAP_ESTIMATE
             elif crit is None and reached:
                 # At its estimate and no cue says a mouth is here: listen a few times, then it is a reflection
                 # (a mirror image beyond a wall triangulates as tightly as a caller: measured in light rubble).
@@ -585,7 +539,7 @@ class RescueBehaviour:
                     if n < cfg.refute_after_listens:
                         self._emit(Decision.NO_TARGET, f"at the estimate of source #{s.id} ({d:.2f} m), heard level or"
                                    f" past it ({math.degrees(ev.elevation):+.0f} deg): listen again "
-                                   f"({n}/{cfg.refute_after_listens})", {"source": s.id})
+                                   f"({n}/{cfg.refute_after_listens})", SourcePayload(s.id))
                         return True
                     kept = self.map.restart_from(sid, xy)
                     self._restarted.add(sid)
@@ -593,14 +547,14 @@ class RescueBehaviour:
                         counts.pop(sid, None)
                     self._emit(Decision.NO_TARGET, f"at the estimate of source #{s.id} ({d:.2f} m), heard level or "
                                f"past it ({math.degrees(ev.elevation):+.0f} deg) in {n} listens: it is farther along "
-                               f"that bearing; re-estimated from the {kept} listen(s) heard here", {"source": s.id})
+                               f"that bearing; re-estimated from the {kept} listen(s) heard here", SourcePayload(s.id))
                     continue
                 if ev is None:
                     n = self._unheard_at[sid] = self._unheard_at.get(sid, 0) + 1
                     if n < 2 * cfg.reject_after_listens:
                         self._emit(Decision.NO_TARGET, f"at the estimate of source #{s.id} ({d:.2f} m), not heard "
                                    f"in this listen: listen again ({n}/{2 * cfg.reject_after_listens})",
-                                   {"source": s.id})
+                                   SourcePayload(s.id))
                         return True
                 elif self._listen_again(s, f"at the estimate of source #{s.id} ({d:.2f} m), no found cue yet"):
                     return True
@@ -621,6 +575,7 @@ class RescueBehaviour:
             # makes it a victim (a buried caller the VAD misses, one who knocks); a tight triangulation near
             # rubble alone does not (measured, half_buried_slab seed 1: a voiceless reflection declared by its
             # map estimate, 1.3 m from a victim).
+            steep_cue = cue in (FindCriterion.STEEP_BEARING, FindCriterion.LEVEL_RISE)
             if not voiced and not steep_cue:
                 self._reject(s, f"reached ({crit}) but no voice heard (P(victim) {s.victim_probability:.2f})")
                 continue
@@ -641,7 +596,7 @@ class RescueBehaviour:
                     continue
                 s = self.map.source(self.map.add_found(floor, self.clock.now()))
                 crit += f"; where this bearing meets the floor (the source it joined is mapped {d:.2f} m away)"
-            self._declare_found(s, crit)
+            self._declare_found(s, crit, cue)
             return True
         return False
 
@@ -651,14 +606,14 @@ class RescueBehaviour:
         c, si = math.cos(yaw), math.sin(yaw)
         u = np.asarray(ev.direction, float)
         u = np.array([c * u[0] - si * u[1], si * u[0] + c * u[1], u[2]])
-        v = s.position - np.array([x, y, self.config.array_height_m])
+        v = s.position - np.array([x, y, self.mount.height_m])
         cos = float(u @ v) / max(float(np.linalg.norm(u) * np.linalg.norm(v)), 1e-12)
         return math.degrees(math.acos(max(-1.0, min(1.0, cos))))
 
     def _bearing_range(self, ev: ListenEvidence, height_m: float) -> float:
         """Horizontal range (m) at which a bearing heard now meets the height ``height_m`` (m above the floor,
         below the array); inf for a bearing not pointing below the horizon."""
-        h = self.config.array_height_m - height_m
+        h = self.mount.height_m - height_m
         return h / math.tan(-ev.elevation) if ev.elevation < 0 else math.inf
 
     def _floor_point(self, ev: ListenEvidence) -> np.ndarray:
@@ -685,7 +640,7 @@ class RescueBehaviour:
         n = self._close_listens[s.id] = self._close_listens.get(s.id, 0) + 1
         if n < self.config.reject_after_listens:
             self._emit(Decision.NO_TARGET, f"{why}: listen again ({n}/{self.config.reject_after_listens})",
-                       {"source": s.id})
+                       SourcePayload(s.id))
             return True
         return False
 
@@ -694,7 +649,7 @@ class RescueBehaviour:
         self.map.set_state(s.id, SourceState.REJECTED, self.clock.now())
         if self.target == s.id:
             self.target, self.plan = None, None
-        self._emit(Decision.REJECTED, f"source #{s.id}: {why}", {"source": s.id, "position": s.position.tolist()})
+        self._emit(Decision.REJECTED, f"source #{s.id}: {why}", RejectedPayload(s.id, s.position.tolist()))
 
     def _near_found(self, xy, source_id: int | None = None) -> bool:
         """World point ``xy`` (m) is within ``found_exclusion_m`` of a victim already found other than
@@ -711,19 +666,18 @@ class RescueBehaviour:
         """May be declared a found victim: classified victim, or (unless ``require_voice``) not yet classified."""
         return s.cls is SourceClass.VICTIM or (not self.config.require_voice and s.cls is SourceClass.UNKNOWN)
 
-    def _declare_found(self, s: MapSource, criterion: str) -> None:
+    def _declare_found(self, s: MapSource, criterion: str, cue: FindCriterion) -> None:
         cfg = self.config
         self.map.set_state(s.id, SourceState.FOUND, self.clock.now())
         pos = (float(s.position[0]), float(s.position[1]))
         height = float(np.clip(s.position[2], 0.0, 2.0))
-        self.victims.append(FoundVictim(pos, self.clock.now(), criterion, height, s.victim_probability, s.id))
+        self.victims.append(FoundVictim(pos, self.clock.now(), criterion, height, s.victim_probability, s.id, cue))
         if self.target == s.id:
             self.target, self.plan = None, None
         self.state = RescueState.FOUND
         self._emit(Decision.VICTIM_FOUND, f"victim #{len(self.victims)} (source #{s.id}) at ({pos[0]:.2f}, "
                                           f"{pos[1]:.2f}) m +- {s.horizontal_sigma_m:.2f} m: {criterion}",
-                   {"position": pos, "height": height, "source": s.id, "criterion": criterion,
-                    "sigma_m": s.horizontal_sigma_m, "victim_probability": s.victim_probability})
+                   FoundPayload(pos, height, s.id, criterion, cue, s.horizontal_sigma_m, s.victim_probability))
         if cfg.max_victims is not None and len(self.victims) >= cfg.max_victims:
             self._finish(Decision.ALL_FOUND, f"found {len(self.victims)} victim(s) = max_victims")
 
@@ -751,7 +705,7 @@ class RescueBehaviour:
                 self.planner.clear_unreachable()
                 self.state = RescueState.RECOVER
                 self._emit(Decision.RECOVER, f"the learned obstacles close every way: {n} cell(s) marked by a single"
-                                             " contact forgotten (clearing recovery)", {"kind": "clear", "cells": n})
+                                             " contact forgotten (clearing recovery)", RecoverPayload("clear", n))
                 return
             self._escape("no reachable direction to explore")
             return
@@ -796,7 +750,7 @@ class RescueBehaviour:
                 self.planner.mark_unreachable(target.id, self.clock.now())
                 self._emit(Decision.NO_TARGET, f"source #{target.id} still +- {target.horizontal_sigma_m:.2f} m after "
                                                f"{cfg.max_baseline_steps} steps across its bearing: set aside a while",
-                           {"source": target.id})
+                           SourcePayload(target.id))
                 return
             bearing = math.atan2(target.position[1] - y, target.position[0] - x)
             side = self._side
@@ -813,8 +767,8 @@ class RescueBehaviour:
         self.state = state
         goal = legs[-1]
         self._emit(decision, f"{prefix + ': ' if prefix else ''}{total:.2f} m toward ({goal[0]:.2f}, {goal[1]:.2f})"
-                             f" in {len(legs)} leg(s)", {"distance": total, "goal": [float(goal[0]), float(goal[1])],
-                                                         "legs": [leg.tolist() for leg in legs]})
+                             f" in {len(legs)} leg(s)", DrivePayload(total, [float(goal[0]), float(goal[1])],
+                                                                     [leg.tolist() for leg in legs]))
         for leg in legs:
             start = self.pose[:2].copy()
             dx, dy = leg - start
@@ -829,9 +783,10 @@ class RescueBehaviour:
 
     def _blocked(self, b: Blocked, target: MapSource | None) -> None:
         cfg = self.config
-        if b.kind == "fault":
+        self.contacts[b.kind] += 1
+        if b.kind is ContactKind.FAULT:
             return  # the mission is over (_check_faults finished it)
-        if b.kind in ("bumper", "range") and target is not None:
+        if b.kind in (ContactKind.BUMPER, ContactKind.RANGE) and target is not None:
             s = self.map.source(target.id)
             x, y, _ = self.pose
             d = s.distance_to((x, y))
@@ -849,10 +804,10 @@ class RescueBehaviour:
                     and s.horizontal_sigma_m <= 2 * cfg.found_sigma_m and voiced and down \
                     and self.clock.now() - s.last_time <= cfg.bump_heard_within_s \
                     and (s.cls is SourceClass.VICTIM or not self._near_machine(s)):
-                touch = "bumped into it" if b.kind == "bumper" else "stopped before an obstacle at it"
+                touch = "bumped into it" if b.kind is ContactKind.BUMPER else "stopped before an obstacle at it"
                 self._declare_found(s, f"{touch} while approaching (estimate {d:.2f} m ahead, "
-                                       f"{math.degrees(off):.0f} deg off the motion)")
-                if not self.done and b.kind == "bumper":
+                                       f"{math.degrees(off):.0f} deg off the motion)", FindCriterion.CONTACT)
+                if not self.done and b.kind is ContactKind.BUMPER:
                     self._back_off(b.heading, "clear the bumper after touching the victim")
                 return
         if target is not None:
@@ -861,24 +816,24 @@ class RescueBehaviour:
                 # Walls the robot cannot see: a mirror image beyond a wall draws it along the wall forever.
                 self.planner.mark_unreachable(target.id, self.clock.now())
                 self._target_contacts[target.id] = 0
-        if b.kind == "range":
+        if b.kind is ContactKind.RANGE:
             self._scan_pose = None
             self._sensed(self.pose, b.status)     # the reading that stopped the move goes into the grid
             seen = [round(r, 2) if math.isfinite(r) else None for r in b.status.ranges or ()]
-            self._emit(Decision.OBSTACLE, "range sensors see an obstacle in the way: replan", {"ranges": seen})
+            self._emit(Decision.OBSTACLE, "range sensors see an obstacle in the way: replan", ObstaclePayload(seen))
             return
         self._recover(b, "while moving")
 
     def _recover(self, b: Blocked, when: str) -> None:
         contact = self.grid.mark_contact(self.pose, b.heading, b.kind)
-        if b.kind == "bumper":
+        if b.kind is ContactKind.BUMPER:
             self.coverage.shadow(contact, b.heading, self.grid.config.contact_width_m)
         self.state = RescueState.RECOVER
-        what = {"bumper": "bumper pressed", "stall": "wheels stalled", "slip": "wheels slipping (gyro)"}[b.kind]
+        what = {ContactKind.BUMPER: "bumper pressed", ContactKind.STALL: "wheels stalled",
+                ContactKind.SLIP: "wheels slipping (gyro)"}[b.kind]
         self._emit(Decision.RECOVER, f"{what} {when}: obstacle mapped at ({contact[0]:.2f}, {contact[1]:.2f}), "
                                      f"back off {self.motion.config.backoff_m:g} m and replan",
-                   {"bumper": b.status.bumper, "stalled": b.status.stalled, "kind": b.kind,
-                    "contact": contact.tolist()})
+                   ContactPayload(b.status.bumper, b.status.stalled, b.kind, contact.tolist()))
         if not self._back_off(b.heading, what):
             self._escape(f"backing off blocked after: {what}")
 
@@ -887,9 +842,10 @@ class RescueBehaviour:
             self.motion.back_off(heading_world)
             return True
         except Blocked as b:
-            if b.kind != "fault":
+            self.contacts[b.kind] += 1
+            if b.kind is not ContactKind.FAULT:
                 self.grid.mark_contact(self.pose, b.heading, b.kind)
-                self._emit(Decision.RECOVER, f"backing off blocked ({b.kind}) after: {why}", {"kind": b.kind})
+                self._emit(Decision.RECOVER, f"backing off blocked ({b.kind}) after: {why}", RecoverPayload(b.kind))
             return False
 
     def _escape(self, why: str) -> None:
@@ -908,7 +864,8 @@ class RescueBehaviour:
                 try:
                     self.motion.turn(math.radians(self.config.wedged_turn_deg))
                 except Blocked as b:
-                    if b.kind == "fault":
+                    self.contacts[b.kind] += 1
+                    if b.kind is ContactKind.FAULT:
                         return
             yaw = float(self.pose[2])
             kinds = []
@@ -920,10 +877,11 @@ class RescueBehaviour:
                                           arm_bumper_on_release=True)
                     self._emit(Decision.RECOVER, f"{why}; freed by moving {math.degrees(heading):.0f} deg "
                                                  f"(robot frame){' after turning in place' if turned else ''}",
-                               {"kind": "escape"})
+                               RecoverPayload("escape"))
                     return
                 except Blocked as b:
-                    if b.kind == "fault":
+                    self.contacts[b.kind] += 1
+                    if b.kind is ContactKind.FAULT:
                         return
                     kinds.append(f"{math.degrees(heading):.0f} deg: {b.kind}")
                     self.grid.mark_contact(self.pose, yaw + heading, b.kind)
@@ -935,7 +893,7 @@ class RescueBehaviour:
         """Array-frame azimuth and elevation (rad) of a world point from the current pose."""
         x, y, yaw = self.pose
         dx, dy = position[0] - x, position[1] - y
-        dz = position[2] - self.config.array_height_m
+        dz = position[2] - self.mount.height_m
         return float(wrap_angle(math.atan2(dy, dx) - yaw)), float(math.atan2(dz, math.hypot(dx, dy)))
 
     def _check_faults(self, status: DriveStatus) -> bool:
@@ -943,7 +901,7 @@ class RescueBehaviour:
         if faults != self._faults_seen:
             new = sorted(set(faults) - set(self._faults_seen))
             if new:
-                self._emit(Decision.DRIVE_FAULT, f"drive reports fault(s) {', '.join(new)}", {"faults": list(faults)})
+                self._emit(Decision.DRIVE_FAULT, f"drive reports fault(s) {', '.join(new)}", DriveFaultPayload(list(faults)))
             self._faults_seen = faults
         fatal = sorted(set(faults) & set(self.config.fatal_faults))
         if fatal:
@@ -954,7 +912,7 @@ class RescueBehaviour:
     def _finish(self, decision: Decision, reason: str) -> None:
         self._safe_stop()
         self.state = RescueState.DONE
-        self._emit(decision, reason, {"victims": [v.position for v in self.victims]})
+        self._emit(decision, reason, FinishPayload([v.position for v in self.victims]))
 
     def _safe_stop(self) -> Exception | None:
         """Stop the drive; the exception if that failed (logged, never raised)."""
@@ -965,8 +923,8 @@ class RescueBehaviour:
             return exc
         return None
 
-    def _emit(self, decision: Decision, reason: str, data: dict[str, Any] | None = None) -> RescueEvent:
-        ev = RescueEvent(self.clock.now(), self.state, Decision(decision), reason, dict(data or {}))
+    def _emit(self, decision: Decision, reason: str, data: Payload = Payload()) -> RescueEvent:
+        ev = RescueEvent(self.clock.now(), self.state, Decision(decision), reason, data)
         self.events.append(ev)
         self._step_events.append(ev)
         log.info("%s", ev)

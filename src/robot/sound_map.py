@@ -2,8 +2,8 @@
 
 Frames. Evidence directions are in the ARRAY frame (the array is level and its axes are the robot's:
 azimuth CCW from forward, elevation up). The map is in the odometry/world frame (x, y, z in m, z up);
-the array centre is ``array_height_m`` above the floor at the robot's (x, y). ``SoundMap.update`` is the
-only place that converts between them, with the pose at which the audio was captured.
+the array centre is ``robot.mount.ArrayMount.height_m`` above the floor at the robot's (x, y).
+``SoundMap.update`` is the only place that converts between them, with the pose at which the audio was captured.
 
 Estimator (per source), after Sasaki et al.'s self-motion triangulation (bearings from many robot poses,
 RANSAC against wrong bearings) and Michaud et al. (IROS 2020: triangulated bearings from poses 30-140 deg
@@ -42,11 +42,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, field
 from enum import Enum
-from typing import Protocol, Sequence
+from typing import ClassVar, Protocol, Sequence
 
 import numpy as np
 
 from robot.config_values import need
+from robot.mount import ArrayMount
 from robot.odometry import Pose2D
 
 __all__ = ["BearingEvidence", "DISTINCT_POSES_M", "SoundMapConfig", "SourceClass", "SourceState", "Listen",
@@ -95,7 +96,6 @@ class SourceState(str, Enum):
 class SoundMapConfig:
     """Parameters of the map (SI units; ``*_deg`` in degrees)."""
 
-    array_height_m: float = 0.30           # array centre above the floor (robot model: cube on a 0.3 m mast)
     source_height_m: float = 0.2           # prior mean height of a source: a lying/sitting victim, a machine
     source_height_sigma_m: float = 0.3     # ... and its spread (a person standing is ~2 sigma)
     bearing_sigma_deg: float = 5.0         # azimuth noise of one listen (SRP-PHAT in RT60 0.6 s rubble: median
@@ -139,8 +139,12 @@ class SoundMapConfig:
         draws = 4 * h if h < pairs else 0     # random pairs drawn (2 x 4 h int64) when not every pair is tried
         return 64.0 * (draws / 4 + (min(h, pairs) + n) * n) / 1e6
 
+    #: Fields that no longer exist (robot.config_values.field_values refuses them, saying where they went).
+    RETIRED: ClassVar[dict[str, str]] = {
+        "array_height_m": "MOVED: the array's height is robot.mount.ArrayMount.height_m (ssl-robot: --set "
+                          "mount.height_m=...; in simulation the robot model's cube height, set by the simulator)"}
+
     def __post_init__(self) -> None:
-        need(self, self.array_height_m > 0, "array_height_m", "> 0 m")
         need(self, self.source_height_sigma_m > 0, "source_height_sigma_m", "> 0 m")
         need(self, 0 < self.bearing_sigma_deg < 45, "bearing_sigma_deg", "in (0, 45) degrees")
         need(self, 0 < self.elevation_sigma_deg < 45, "elevation_sigma_deg", "in (0, 45) degrees")
@@ -427,8 +431,8 @@ def _refine(o: np.ndarray, d: np.ndarray, p0: np.ndarray, cfg: SoundMapConfig, i
 class SoundMap:
     """Sound sources in the world frame, built from listens at known poses (see the module docstring)."""
 
-    def __init__(self, config: SoundMapConfig = SoundMapConfig()) -> None:
-        self.config = config
+    def __init__(self, config: SoundMapConfig = SoundMapConfig(), mount: ArrayMount = ArrayMount()) -> None:
+        self.config, self.mount = config, mount
         self._sources: list[_Source] = []
         self._next_id = 1  # numbered from 1, as the victims found are, in everything the behaviour prints
         self._track_to_source: dict[int, int] = {}
@@ -470,7 +474,7 @@ class SoundMap:
         self.time = float(time)
         c, s = math.cos(yaw), math.sin(yaw)
         rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
-        origin = np.array([x, y, self.config.array_height_m])
+        origin = np.array([x, y, self.mount.height_m])
         rays = []
         for ev in evidence:
             u = np.asarray(ev.direction, float).reshape(3)

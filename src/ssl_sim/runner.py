@@ -25,7 +25,9 @@ What is measured (all from the simulator's truth, never from the robot's own est
   seconds of this process (a machine shared with other work inflates the wall clock, not the CPU time).
 
 results.json also lists every declaration (``declarations``: reported position, base position, its kind:
-find, false_find, too_far or late), the false finds alone (``false_finds``), ``n_reached``, the scoring
+find, false_find, too_far or late; ``cue``: the ``robot.rescue.FindCriterion`` that declared it), the finds counted
+by that cue (``finds_by_criterion``), every move that ended early counted by why (``contacts_by_kind``:
+``robot.motion.ContactKind``), the false finds alone (``false_finds``), ``n_reached``, the scoring
 constants (``scoring``) and where the result came from (``provenance``: commit, package versions, BLAS kernel,
 CPU).
 """
@@ -47,7 +49,10 @@ import numpy as np
 from robot.odometry import Odometry, wrap_angle
 from robot.ranging import RangeLayout, ray_ends
 from robot.monitored_audio import MonitoredAudio
-from robot.rescue import Decision, RescueBehaviour, RescueEvent
+from robot.mount import ArrayMount
+from robot.motion import ContactKind
+from robot.events import ContactPayload, Decision, FindCriterion, RescueEvent
+from robot.rescue import RescueBehaviour
 from robot.vad import ModelError
 from ssl_core.geometry import cube8
 from ssl_core.health import HealthConfig, MicHealth
@@ -163,8 +168,11 @@ class RescueRun:
         if stages["coverage"].area is None:
             # The search area, as a rescuer's floor plan gives it: the room's floor (world = odometry frame here).
             stages["coverage"] = replace(stages["coverage"], area=(0.0, 0.0, *map(float, world.room.size[:2])))
+        # The behaviour's array height is the simulated robot's: its cube sits at the model's array_height.
+        self.mount = ArrayMount(height_m=robot.config.array_height)
         self.behaviour = RescueBehaviour(self.mic_health, self.drive, self.clock, self.localizer, sc.behaviour,
-                                         params=robot.params, start_pose=world.robot_start, **stages)
+                                         params=robot.params, mount=self.mount, start_pose=world.robot_start,
+                                         **stages)
         self.paths = FreeSpaceGraph(world)
         self.judge = Judge([s.position for s in self.sources[: self.n_victims]], sc.time_limit_s)
         # truth bookkeeping
@@ -296,13 +304,14 @@ class RescueRun:
                 if ev.decision is Decision.TARGET and self.audio.last_array_poses:
                     # Decided right after the listen: the array pose at the end of that block.
                     origin, rot = self.audio.last_array_poses[-1]
-                    self.logger.target(ev.time, origin, rot @ _unit(ev.data["azimuth"], ev.data["elevation"]))
+                    self.logger.target(ev.time, origin, rot @ _unit(ev.data.azimuth, ev.data.elevation))
             if ev.decision is not Decision.VICTIM_FOUND:
                 continue
             _, x, y, _, _ = self._pose_at(ev.time)
-            est = ev.data.get("position", (math.nan, math.nan))
+            est = ev.data.position
             j = self.judge.declare(ev.time, est, (x, y))
-            entry = {"time_s": _r(ev.time, 2), "criterion": ev.data.get("criterion", ""), "kind": j.kind,
+            entry = {"time_s": _r(ev.time, 2), "criterion": ev.data.criterion, "cue": str(ev.data.cue),
+                     "kind": j.kind,
                      "estimate": [_r(est[0]), _r(est[1])], "robot_position": [_r(x), _r(y)],
                      "victim": self.sources[j.victim].name if j.victim is not None else None,
                      "estimate_error_m": _r(j.report_error_m), "robot_distance_m": _r(j.base_distance_m),
@@ -314,7 +323,7 @@ class RescueRun:
                 self._find_legs.append((j.victim, (x, y), self._path_at(ev.time)))  # unrounded, for SPL
                 if self.logger.enabled:
                     order = sorted(self.found)
-                    h = [ev.data.get("height", 0.1)] * len(order)
+                    h = [ev.data.height] * len(order)
                     est = np.array([[*self.found[k]["estimate"], hk] for k, hk in zip(order, h)], float)
                     self.logger.found(ev.time, est, np.array([self.sources[k].position for k in order]),
                                       [f"{self.sources[k].name} (off {self.found[k]['estimate_error_m']:.2f} m)"
@@ -430,7 +439,7 @@ class RescueRun:
         acou = self.audio.timing["acoustics"]
         loc = self.localizer.seconds
         sim_t = self.robot.time
-        bumps = sum(1 for e in self.events if e.decision is Decision.RECOVER and e.data.get("bumper"))
+        bumps = bumper_recoveries(self.events)
         return {
             "scenario": sc.name, "scenario_file": sc.path, "seed": self.seed, "scene": self.world.name,
             "description": sc.description,
@@ -445,6 +454,7 @@ class RescueRun:
             "path_length_m": _r(self.cum_path[-1]), "collisions": len(self.collisions),
             "collision_log": self.collisions, "bumper_recoveries": bumps,
             "range_stops": sum(1 for e in self.events if e.decision is Decision.OBSTACLE),
+            **outcome_counts(self.behaviour, self.declarations),
             "n_listens": len(self.listens),
             "angular_error_deg": {"all_detections": stats(errs), "strongest_detection": stats(first)},
             "listens": self.listens,
@@ -452,7 +462,7 @@ class RescueRun:
             "microphone_faults": [{"time_s": _r(t, 2), "state": state, "kind": f.kind, "channels": list(f.channels),
                                    "detail": f.detail} for t, state, f in self.mic_health.history],
             "config": {"behaviour": asdict(sc.behaviour), "localizer": asdict(sc.localizer),
-                       **{k: asdict(v) for k, v in sc.stage_configs().items()},
+                       **{k: asdict(v) for k, v in sc.stage_configs().items()}, "mount": asdict(self.mount),
                        "acoustics": dict(sc.acoustics),
                        "noise": asdict(sc.noise) if sc.noise is not None else None},
             "provenance": provenance(),
@@ -461,6 +471,19 @@ class RescueRun:
                              "other": _r(loop_s - phys - acou - loc, 3),
                              "per_sim_second": _r(loop_s / max(sim_t, 1e-9), 4), "cpu": self._cpu_split()},
         }
+
+
+def bumper_recoveries(events: list[RescueEvent]) -> int:
+    """Contacts mapped with the bumper pressed (the robot backed off)."""
+    return sum(1 for e in events if isinstance(e.data, ContactPayload) and e.data.bumper)
+
+
+def outcome_counts(behaviour: RescueBehaviour, declarations: list[dict]) -> dict[str, dict[str, int]]:
+    """``contacts_by_kind``: the behaviour's moves that ended early, by ``ContactKind``; ``finds_by_criterion``: the
+    declarations scored "find", by the ``FindCriterion`` that declared them (every member listed, zeros too)."""
+    return {"contacts_by_kind": {k.value: behaviour.contacts[k] for k in ContactKind},
+            "finds_by_criterion": {c.value: sum(1 for d in declarations if d["kind"] == "find" and d.get("cue") == c)
+                                   for c in FindCriterion}}
 
 
 def _json_default(o):
@@ -574,7 +597,7 @@ def odometry_drift(scenario: Scenario | str | Path, seed: int, duration_s: float
 
     (hf, pf), (hw, pw) = errors(beh.odometry.pose), errors(wheels.pose)   # pf, pw unrounded (m)
     return {"scenario": sc.name, "seed": seed, "sim_time_s": run.robot.time, "cpu_s": time.process_time() - t0,
-            "bumper_recoveries": sum(1 for e in run.events if e.decision is Decision.RECOVER and e.data.get("bumper")),
+            "bumper_recoveries": bumper_recoveries(run.events),
             "range_stops": sum(1 for e in run.events if e.decision is Decision.OBSTACLE),
             "n_found": len(run.found), "heading_error_deg": hf, "position_error_m": pf,
             "wheels_heading_error_deg": hw, "wheels_position_error_m": pw,

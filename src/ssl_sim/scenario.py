@@ -43,7 +43,7 @@ of the robot start in radians. Example (``ssl_sim/scenarios/paper_lab.toml``)::
     [localizer]              # ssl_core LocalizerConfig fields
     [behaviour]              # robot.rescue RescueConfig fields (decisions)
     [motion]                 # robot.motion MotionConfig fields
-    [sound_map]              # robot.sound_map SoundMapConfig fields (array_height_m comes from [behaviour])
+    [sound_map]              # robot.sound_map SoundMapConfig fields
     [planner]                # robot.planner PlannerConfig fields
     [occupancy]              # robot.occupancy OccupancyConfig fields
     [coverage]               # robot.coverage CoverageConfig fields (area: the room's floor unless given)
@@ -467,11 +467,7 @@ def parse_scenario(data: dict, base_dir: str | Path = ".", path: str = "") -> Sc
         raise err(in_section(str(exc), AcousticConfig, "acoustics")) from None
     localizer = _dataclass(LocalizerConfig, _table(data, "localizer", where), "localizer", where)
     _check_localizer(localizer, AcousticConfig(**acoustics).fs, where)
-    beh = dict(_table(data, "behaviour", where))
-    # The simulated robot's cube sits at RobotModelConfig.array_height: the range-from-elevation
-    # estimate needs the true height unless the scenario deliberately says otherwise.
-    beh.setdefault("array_height_m", RobotModelConfig().array_height)
-    behaviour = _dataclass(RescueConfig, beh, "behaviour", where)
+    behaviour = _dataclass(RescueConfig, _table(data, "behaviour", where), "behaviour", where)
     if behaviour.listen_s * localizer.fs < localizer.frame_size:
         raise err(f"behaviour.listen_s: {behaviour.listen_s} s is shorter than one localizer frame")
     stages = {key: _dataclass(cls, _table(data, key, where), key, where)

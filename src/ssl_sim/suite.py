@@ -51,7 +51,6 @@ from robot.sound_map import SoundMapConfig
 from ssl_core.localizer import LocalizerConfig
 from ssl_sim.acoustics.sound_set import SoundFile, sound_files
 from ssl_sim.acoustics.voices import SPEAKERS
-from ssl_sim.physics.robot_model import RobotModelConfig
 from ssl_sim.physics.scene_gen import RubbleConfig, generate_world, reachable_victims
 from ssl_sim.physics.scenes import _toml_value, save_scene
 from ssl_sim.scenario import Scenario, ScenarioError, SceneSpec, load_scenario
@@ -391,7 +390,7 @@ def _scenario_table(sc: Scenario) -> dict[str, Any]:
                      else {"level_db_spl": sc.noise.level_db_spl, "spectrum": sc.noise.spectrum})
     data["acoustics"] = dict(sc.acoustics)
     defaults = {"localizer": LocalizerConfig(),
-                "behaviour": RescueConfig(array_height_m=RobotModelConfig().array_height),
+                "behaviour": RescueConfig(),
                 "motion": MotionConfig(), "sound_map": SoundMapConfig(), "planner": PlannerConfig(),
                 "occupancy": OccupancyConfig(), "coverage": CoverageConfig()}
     for key, default in defaults.items():

@@ -12,6 +12,7 @@ from dataclasses import dataclass, field
 
 import numpy as np
 
+from robot.mount import ArrayMount as RobotArrayMount
 from ssl_core.geometry import ArrayGeometry, cube8
 
 
@@ -53,16 +54,16 @@ class RobotPose:
 
 
 @dataclass(frozen=True)
-class ArrayMount:
-    """The array on the robot: ``geometry`` (array frame), cube centre ``height_m`` above the body
-    origin and ``offset_xy_m`` forward/left of it (robot frame, m).
+class ArrayMount(RobotArrayMount):
+    """The array on the simulated robot: the behaviour's ``robot.mount.ArrayMount`` (cube centre ``height_m`` above
+    the body origin) with what only the simulator needs: the ``geometry`` (array frame) and ``offset_xy_m``
+    forward/left of the body origin (robot frame, m).
 
     ``build_error_m``: standard deviation (per axis, m) of where each capsule really sits relative
     to the nominal geometry - a hand-built cube is off by millimetres; the localizer only knows
     the nominal positions. The error is fixed per ``build_seed`` (one physical array)."""
 
     geometry: ArrayGeometry = field(default_factory=cube8)
-    height_m: float = 0.30
     offset_xy_m: tuple[float, float] = (0.0, 0.0)
     build_error_m: float = 0.0
     build_seed: int = 0

@@ -17,13 +17,14 @@ A policy is a callable ``policy(obs) -> action`` with ``reset()`` at episode sta
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, replace
+from dataclasses import dataclass
 
 import numpy as np
 from gymnasium import spaces
 
 from robot.coverage import ListeningCoverage
 from robot.motion import MotionConfig
+from robot.mount import ArrayMount
 from robot.occupancy import OccupancyConfig, OccupancyGrid
 from robot.odometry import wrap_angle
 from robot.planner import Planner, PlannerConfig
@@ -90,14 +91,15 @@ class MapPlanningPolicy:
                  planner: PlannerConfig = PlannerConfig(min_unknown_listens=1),
                  occupancy: OccupancyConfig = OccupancyConfig()) -> None:
         self.env_config, self.motion_config, self.planner_config = env_config, motion, planner
-        self.sound_map_config = replace(sound_map, array_height_m=RobotModelConfig().array_height)
+        self.sound_map_config = sound_map
+        self.mount = ArrayMount(height_m=RobotModelConfig().array_height)   # the simulated robot's cube
         self.occupancy_config = occupancy
         self.reset()
 
     def reset(self, seed: int | None = None) -> None:
         self.pose = np.zeros(3)
         self.time = 0.0
-        self.map = SoundMap(self.sound_map_config)
+        self.map = SoundMap(self.sound_map_config, self.mount)
         self.grid = OccupancyGrid(self.occupancy_config)
         self.coverage = ListeningCoverage(self.grid.origin, self.grid.n, self.grid.resolution)
         self.planner = Planner(self.planner_config)
