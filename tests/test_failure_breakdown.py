@@ -137,3 +137,13 @@ def test_share_interval_resamples_runs():
 def test_test_split_runs_are_refused():
     with pytest.raises(ValueError, match="test-split"):
         fb.classify_run(_run(name="test_003_voids"))
+
+
+def test_undetected_cause_compares_direct_levels_with_the_interferer():
+    # machine 70 dB at 1 m heard from 3 m: 60.5 dB; she (65 dB at 1 m) from 3.16 m: 55 dB, below it
+    v = fb.classify_run(_run(**CASES["undetected"]))["victims"][0]
+    assert v["best_direct_sir_db"] == pytest.approx(65 - 20 * math.log10(math.dist(START, VICTIM))
+                                                    - (70 - 20 * math.log10(3.0)), abs=0.05)
+    assert v["undetected_cause"] == "below an interferer at every listen"
+    v = fb.classify_run(_run(**{**CASES["undetected"], "level_db": 80.0}))["victims"][0]
+    assert v["undetected_cause"] == "above every interferer at some listen"

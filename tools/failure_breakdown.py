@@ -8,7 +8,8 @@ whatever the links say):
    the diffuse noise level during a listen in which she was calling;
 2. ``undetected``: sounding, but no listen's detection matched to her (the runner matches each detection to the
    nearest calling source) lies within ``NEAR_DEG`` of her true azimuth (the map is built from horizontal
-   bearings; the cube's elevation is the worse coordinate, floor reflections);
+   bearings; the cube's elevation is the worse coordinate, floor reflections); the cause says whether her direct
+   level stayed below the sounding interferers' (power sum of their direct levels) at every listen;
 3. ``unmapped``: detected, but no sound-map source ever lay within ``MAP_NEAR_M`` of her (horizontal);
 4. ``not_targeted``: mapped, but no ``target`` decision chose a source of hers (classified interferer, low
    P(victim), rejected, or only never chosen);
@@ -195,6 +196,27 @@ def direct_snr_db(level_1m_db: float, buried: float, distance_m: float, noise_db
     return level_1m_db - 20.0 * math.log10(max(distance_m, 0.1)) - COVER_LOSS_DB * buried - noise_db
 
 
+def _direct_sir_db(run: dict, name: str) -> list[float]:
+    """Per listen in which she called and an interferer sounded: her direct level at the array over the power sum
+    of the sounding interferers' direct levels (dB; same spreading and covering model). Empty without the
+    interferers' levels (``sources_truth``)."""
+    truth = {s["name"]: s for s in run.get("sources_truth", [])}
+    if name not in truth:
+        return []
+    out = []
+    for rec in run.get("listens", []):
+        by = {s["name"]: s for s in rec["sources"]}
+        me = by.get(name)
+        if me is None or not me.get("active"):
+            continue
+        others = [direct_snr_db(truth[n]["level_db_spl"], truth[n]["buried"], s["distance_m"], 0.0)
+                  for n, s in by.items() if n in truth and truth[n]["kind"] != "victim" and s.get("active")]
+        if others:
+            mine = direct_snr_db(truth[name]["level_db_spl"], truth[name]["buried"], me["distance_m"], 0.0)
+            out.append(mine - 10.0 * math.log10(sum(10 ** (o / 10.0) for o in others)))
+    return out
+
+
 def _noise_db(run: dict) -> float:
     noise = (run.get("config") or {}).get("noise")
     return -math.inf if not noise else float(noise["level_db_spl"])
@@ -229,7 +251,8 @@ def _base_positions(run: dict) -> list[tuple[float, list[float]]]:
 
 def _reason_key(reason: str) -> str:
     """An event's reason without its numbers and source ids: what the behaviour said, to count."""
-    key = re.sub(r"#\d+", "#", reason)
+    key = re.sub(r"^source #\d+: ", "", reason)      # a rejection: what follows is why
+    key = re.sub(r"#\d+", "#", key)
     key = re.sub(r"[-+]?\d+(\.\d+)?", "N", key)
     return key.split(":")[0][:90]
 
@@ -245,7 +268,13 @@ def classify_victim(run: dict, k: int, events: list[dict] | None = None) -> dict
     snrs = [direct_snr_db(v["level_db_spl"], v.get("buried", 0.0), s["distance_m"], noise)
             for rec in run.get("listens", []) for s in rec["sources"] if s["name"] == name and s.get("active")]
     out["best_direct_snr_db"] = round(max(snrs), 1) if snrs else None
+    sirs = _direct_sir_db(run, name)
+    out["best_direct_sir_db"] = round(max(sirs), 1) if sirs else None
     out["listens_calling"] = len(snrs)
+    # the steepest true bearing down to her from any listening pose (array frame): what an elevation cue can see
+    els = [s["elevation_deg"] for rec in run.get("listens", []) for s in rec["sources"]
+           if s["name"] == name and s.get("elevation_deg") is not None]
+    out["steepest_true_deg"] = round(-min(els), 1) if els else None
     sounding = bool(snrs) and max(snrs) > 0.0
     # 2. detected within NEAR_DEG
     errs = [abs(d["azimuth_error_deg"]) for rec in run.get("listens", []) for d in rec["detections"]
@@ -254,6 +283,9 @@ def classify_victim(run: dict, k: int, events: list[dict] | None = None) -> dict
     out["detections_near"] = len(hits)
     out["best_error_deg"] = round(min(errs), 1) if errs else None
     detected = bool(hits)
+    if sounding and not detected:
+        out["undetected_cause"] = ("no interferer calling" if not sirs else "below an interferer at every listen"
+                                   if max(sirs) < 0.0 else "above every interferer at some listen")
     # 3. a map source of hers
     ids, rows = _her_sources(run, events, xy)
     out["map_sources"] = sorted(ids)
@@ -301,8 +333,13 @@ def classify_victim(run: dict, k: int, events: list[dict] | None = None) -> dict
     if approached and not declared:
         near = [(t, p) for t, p in bases if _hdist(p, xy) <= FIND_BASE_RADIUS_M]
         out["time_first_within_1_5_m_s"] = near[0][0]
-        out["listens_within_1_5_m"] = sum(1 for rec in run.get("listens", [])
-                                          if _hdist(rec["pose"][:2], xy) <= FIND_BASE_RADIUS_M)
+        near_recs = [rec for rec in run.get("listens", []) if _hdist(rec["pose"][:2], xy) <= FIND_BASE_RADIUS_M]
+        calling = [rec for rec in near_recs if any(s["name"] == name and s.get("active") for s in rec["sources"])]
+        heard = [rec for rec in calling if any(d.get("source") == name and d.get("azimuth_error_deg") is not None
+                                               and abs(d["azimuth_error_deg"]) <= NEAR_DEG for d in rec["detections"])]
+        out["listens_within_1_5_m"] = len(near_recs)
+        out["near_listens_calling"] = len(calling)
+        out["near_listens_calling_heard"] = len(heard)
         said = Counter(_reason_key(e["reason"]) for e in events if e["decision"] in ("no_target", "rejected")
                        and int(e["data"].get("source", -1)) in ids)
         out["her_source_events"] = dict(said)
@@ -447,20 +484,26 @@ def summarize_runs(rows: list[dict]) -> dict[str, Any]:
     sub = defaultdict(Counter)
     for r in rows:
         for v in r["victims"]:
-            for key in ("not_targeted_cause", "not_approached_cause", "not_declared_cause", "declared_off_cause"):
+            for key in ("undetected_cause", "not_targeted_cause", "not_approached_cause", "not_declared_cause", "declared_off_cause"):
                 if key in v and v["stage"] == key.replace("_cause", ""):
                     sub[v["stage"]][v[key]] += 1
-    said = Counter()
+    said, near = Counter(), Counter()
     for r in rows:
         for v in r["victims"]:
             if v["stage"] == "not_declared":
                 said.update(v.get("her_source_events", {}))
+                steep = v.get("steepest_true_deg")
+                near.update({"victims": 1, "steepest_below_20_deg": int(steep is not None and steep < 20.0),
+                             "steepest_below_30_deg": int(steep is not None and steep < 30.0)})
+                near.update({"listens": v["listens_within_1_5_m"], "calling": v["near_listens_calling"],
+                             "calling_heard": v["near_listens_calling_heard"]})
     time_tot = {a: float(sum(r["time_s"][a] for r in rows)) for a in ACTIVITIES}
     all_t = sum(time_tot.values()) or 1.0
     return {"n_runs": len(rows), "n_victims": int(totals.sum()), "stages": stages, "links": links,
             "families": {f: dict(c) for f, c in sorted(fams.items())},
             "stage_causes": {k: dict(c) for k, c in sub.items()},
             "not_declared_events": dict(said.most_common()),
+            "not_declared_near_listens": dict(near),
             "false_finds": {"total": int(sum(causes.values())), "per_run": round(sum(causes.values()) / len(rows), 3),
                             "causes": dict(causes)},
             "time_share": {a: round(t / all_t, 3) for a, t in time_tot.items()},
@@ -483,6 +526,9 @@ def format_tables(summary: dict) -> str:
     lines += ["", "causes within stages: " + json.dumps(summary["stage_causes"]),
               "what the behaviour said about the sources of approached, undeclared victims: "
               + json.dumps(summary["not_declared_events"]),
+              "those victims, their steepest true bearing from a listening pose, and their listens within 1.5 m "
+              "(all, she calling, she calling and detected within 10 deg): "
+              + json.dumps(summary["not_declared_near_listens"]),
               f"false finds: {summary['false_finds']['total']} ({summary['false_finds']['per_run']} per run) "
               + json.dumps(summary["false_finds"]["causes"]),
               "robot time share: " + ", ".join(f"{a} {t:.2f}" for a, t in summary["time_share"].items()),
