@@ -137,7 +137,13 @@ def run_one(index: int, out_dir: str, time_limit_s: float | None = None) -> str:
                                     for s in self.sources]
             return res
 
-    res = _Run(sc).run()
+    run = _Run(sc)
+    try:
+        res = run.run()
+    except Exception as exc:   # the simulator refused a state (a microphone driven inside an obstacle): keep
+        # the run up to there, classified like any other, with its end reason saying why it stopped
+        res = run._results("simulator_error", 0.0)
+        res["failure"] = {"part": "simulator", "error": f"{type(exc).__name__}: {exc}"}
     out = Path(out_dir) / sc.name
     write_results(res, out)
     return str(out / "results.json")
@@ -441,7 +447,7 @@ def classify_run(run: dict) -> dict[str, Any]:
         raise ValueError(f"scenario: {name!r} is a test-split scenario; the breakdown reads train runs only")
     events = _events(run)
     return {"scenario": name, "family": _family(run), "n_victims": run["n_victims"], "n_found": run["n_found"],
-            "end_reason": run.get("end_reason"), "sim_time_s": run.get("sim_time_s"),
+            "end_reason": run.get("end_reason"), "sim_time_s": run.get("sim_time_s"), "failure": run.get("failure"),
             "victims": [classify_victim(run, k, events) for k in range(len(run["victims"]))],
             "false_finds": false_find_causes(run), "time_s": time_split(run, events)}
 
@@ -507,7 +513,8 @@ def summarize_runs(rows: list[dict]) -> dict[str, Any]:
             "false_finds": {"total": int(sum(causes.values())), "per_run": round(sum(causes.values()) / len(rows), 3),
                             "causes": dict(causes)},
             "time_share": {a: round(t / all_t, 3) for a, t in time_tot.items()},
-            "end_reasons": dict(Counter(r["end_reason"] for r in rows))}
+            "end_reasons": dict(Counter(r["end_reason"] for r in rows)),
+            "failures": {r["scenario"]: r["failure"] for r in rows if r.get("failure")}}
 
 
 def format_tables(summary: dict) -> str:
@@ -533,6 +540,7 @@ def format_tables(summary: dict) -> str:
               + json.dumps(summary["false_finds"]["causes"]),
               "robot time share: " + ", ".join(f"{a} {t:.2f}" for a, t in summary["time_share"].items()),
               "end reasons: " + json.dumps(summary["end_reasons"])]
+    lines += [f"run failed: {name}: {f}" for name, f in summary["failures"].items()]
     return "\n".join(lines)
 
 
