@@ -77,6 +77,7 @@ _EVENT = re.compile(r"^\[\s*([-\d.]+) s\]\s+(\S+)\s+(\S+)\s+(.*)$")
 
 
 def _map_row(s) -> dict[str, Any]:
+    """One sound-map source (``robot.sound_map.MapSource``) as a JSON row (m, world frame)."""
     return {"id": int(s.id), "x": round(float(s.position[0]), 3), "y": round(float(s.position[1]), 3),
             "z": round(float(s.position[2]), 3), "sigma_m": round(float(s.horizontal_sigma_m), 3),
             "p_victim": round(float(s.victim_probability), 3), "cls": str(s.cls.value),
@@ -84,7 +85,7 @@ def _map_row(s) -> dict[str, Any]:
 
 
 def _jsonable(v):
-    import numpy as np
+    """An event's data as JSON values (numpy to lists and numbers, enums and the rest as text)."""
     if isinstance(v, dict):
         return {str(k): _jsonable(x) for k, x in v.items()}
     if isinstance(v, (list, tuple)):
@@ -111,21 +112,26 @@ def run_one(index: int, out_dir: str, time_limit_s: float | None = None) -> str:
         sc = sc.with_overrides(time_limit_s=time_limit_s)
 
     class _Run(RescueRun):
+        """The runner, also recording typed events and the sound map after every listen."""
+
+        def __init__(self, *args, **kwargs):
+            super().__init__(*args, **kwargs)
+            self.event_log: list[dict] = []
+            self.map_log: list[dict] = []
+
         def _handle_events(self, events):
             super()._handle_events(events)
-            log = self.__dict__.setdefault("_event_log", [])
-            maps = self.__dict__.setdefault("_map_log", [])
             for ev in events:
-                log.append({"time_s": round(ev.time, 3), "state": ev.state.value, "decision": ev.decision.value,
-                            "reason": ev.reason, "data": _jsonable(ev.data)})
+                self.event_log.append({"time_s": round(ev.time, 3), "state": ev.state.value,
+                                       "decision": ev.decision.value, "reason": ev.reason,
+                                       "data": _jsonable(ev.data)})
             if any(ev.decision.value in ("heard", "no_source") for ev in events):
-                maps.append({"time_s": round(self.robot.time, 3),
-                             "sources": [_map_row(s) for s in self.behaviour.map.sources]})
+                self.map_log.append({"time_s": round(self.robot.time, 3),
+                                     "sources": [_map_row(s) for s in self.behaviour.map.sources]})
 
         def _results(self, end_reason, loop_s):
             res = super()._results(end_reason, loop_s)
-            res["event_log"] = self.__dict__.get("_event_log", [])
-            res["map_log"] = self.__dict__.get("_map_log", [])
+            res["event_log"], res["map_log"] = self.event_log, self.map_log
             res["suite"] = {"split": "train", "index": index, "family": suite.family_of(sc.name)}
             res["room_size"] = [float(v) for v in self.world.room.size[:2]]
             # closest true approach of the base to each victim over the whole trajectory (between listens too)
@@ -150,6 +156,7 @@ def run_one(index: int, out_dir: str, time_limit_s: float | None = None) -> str:
 
 
 def run_many(indices: list[int], out_dir: str, workers: int = 2) -> list[str]:
+    """Run train scenarios ``indices`` in a pool of ``workers`` processes (each at nice 10); their results paths."""
     ctx = mp.get_context("spawn")
     paths = []
     with cf.ProcessPoolExecutor(workers, mp_context=ctx) as ex:
@@ -490,9 +497,9 @@ def summarize_runs(rows: list[dict]) -> dict[str, Any]:
     sub = defaultdict(Counter)
     for r in rows:
         for v in r["victims"]:
-            for key in ("undetected_cause", "not_targeted_cause", "not_approached_cause", "not_declared_cause", "declared_off_cause"):
-                if key in v and v["stage"] == key.replace("_cause", ""):
-                    sub[v["stage"]][v[key]] += 1
+            key = f"{v['stage']}_cause"
+            if key in v:
+                sub[v["stage"]][v[key]] += 1
     said, near = Counter(), Counter()
     for r in rows:
         for v in r["victims"]:
