@@ -524,6 +524,17 @@ def summarize_runs(rows: list[dict]) -> dict[str, Any]:
             "failures": {r["scenario"]: r["failure"] for r in rows if r.get("failure")}}
 
 
+def format_runs(rows: list[dict]) -> str:
+    """One line per run: finds, false finds with causes, robot seconds per activity, end reason."""
+    lines = [f"{'run':<28}{'found':>6}  {'false finds':<30}" + "".join(f"{a[:9]:>10}" for a in ACTIVITIES)
+             + "  end"]
+    for r in rows:
+        ff = ", ".join(f["cause"] for f in r["false_finds"]) or "-"
+        lines.append(f"{r['scenario']:<28}{r['n_found']:>3}/{r['n_victims']:<2}  {ff[:30]:<30}"
+                     + "".join(f"{r['time_s'][a]:>10.1f}" for a in ACTIVITIES) + f"  {r['end_reason']}")
+    return "\n".join(lines)
+
+
 def format_tables(summary: dict) -> str:
     lines = [f"{summary['n_victims']} victims in {summary['n_runs']} runs", "",
              f"{'stage reached (first broken link)':<48} {'count':>5}  share [95 % interval, runs resampled]"]
@@ -574,6 +585,7 @@ def main(argv: list[str] | None = None) -> int:
     runs = load_runs(a.runs or a.out)
     rows = [classify_run(r) for r in runs]
     summary = summarize_runs(rows)
+    print(format_runs(rows) + "\n")
     print(format_tables(summary))
     if a.json:
         Path(a.json).parent.mkdir(parents=True, exist_ok=True)
