@@ -582,8 +582,10 @@ def main(argv: list[str] | None = None) -> int:
         if a.count < 1 or a.start < 0:
             ap.error(f"--count must be >= 1 and --start >= 0, got {a.count} and {a.start}")
         run_many(list(range(a.start, a.start + a.count)), a.out, a.workers)
-    runs = load_runs(a.runs or a.out)
-    rows = [classify_run(r) for r in runs]
+    try:
+        rows = [classify_run(r) for r in load_runs(a.runs or a.out)]
+    except (FileNotFoundError, ValueError) as exc:
+        ap.error(str(exc))
     summary = summarize_runs(rows)
     print(format_runs(rows) + "\n")
     print(format_tables(summary))
