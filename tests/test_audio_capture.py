@@ -302,14 +302,18 @@ def test_capture_tracks_a_drifting_offset():
     cap.close()
 
 
-def test_capture_detects_and_corrects_a_5_ms_slip():
+@pytest.mark.parametrize("pace", [0.15, 0.0], ids=["live", "all_buffered"])
+def test_capture_detects_and_corrects_a_5_ms_slip(pace):
     # Device 1's stream slips by 80 samples (5 ms, beyond the +-2 ms drift search) 2 s in: the tracker
     # must not apply a wrong nearby offset but find the new one (re-calibration), count and log it.
+    # "all_buffered": the devices delivered everything before the reader asks (a reader slowed by a loaded CPU
+    # lags the capture by seconds): the slip is measured on audio far ahead of the cursor and must apply from
+    # where it happened, not to the audio before it.
     truth = 0.3 * _plane_wave(_unit(-40, 20), 5 * FS, seed=8) / 4
     before, after = _devices(truth, 200), _devices(truth, 280)
     at = 2 * FS  # device-1 index of the slip
     dev = [before[0], np.concatenate([before[1][:, :at], after[1][:, at:]], axis=1)]
-    sd = _FakeSD(dev, pace=0.15)  # delivered as a live device would, 0.15 s per s of audio
+    sd = _FakeSD(dev, pace=pace)  # live: delivered as a live device would, 0.15 s per s of audio
     cap = ArrayCapture((1, 2), FS, positions=G.positions, blocksize=512, track_every_s=0.5, backend=sd)
     cap.merger.set_offset(200)
     seen = []
@@ -321,6 +325,8 @@ def test_capture_detects_and_corrects_a_5_ms_slip():
     assert fixed + 280 >= at - 1024                           # not before the slip happened ...
     assert fixed - (at - 200) <= 1.5 * FS                     # ... and within 1.5 s of audio after it
     assert cap.merger.slips == 1
+    if pace == 0.0:   # measured ahead of the cursor: switched in the read that holds the slip (to a 64 ms segment)
+        assert fixed - 1024 <= (at - 200) + 1024
     block = cap.read(4000)
     start = cap.merger.cursor - 4000
     np.testing.assert_array_equal(block.samples, (truth[:, start:start + 4000] * 32767).astype(np.int16))

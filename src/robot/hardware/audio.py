@@ -124,6 +124,7 @@ class OffsetEstimate:
     fit_residual_s: float | None  # refine: RMS misfit of the pair delays (s); None when not refined
     direction: np.ndarray | None  # refine: unit vector toward the calibration sound (array frame)
     confident: bool
+    window: tuple[int, int] | None = None  # device-0 stream indices [start, end) of the audio it was measured on
 
     def __str__(self) -> str:
         fit = "" if self.fit_residual_s is None else f", fit residual {self.fit_residual_s * 1e6:.1f} us"
@@ -205,6 +206,9 @@ class ChannelMerger:
         self._buf = [np.zeros((n, 0), np.int16) for n in config.device_channels]
         self._start = [0, 0]      # stream index of each buffer's first column
         self._cursor = 0          # device-0 stream index of the next output sample
+        # (device-0 index, offset): a slip measured on audio ahead of the cursor applies from where it happened,
+        # not to the audio before it still waiting to be popped
+        self._pending: tuple[int, int] | None = None
 
     # -- buffering --------------------------------------------------------------
     def push(self, device: int, samples: np.ndarray, start_index: int | None = None) -> None:
@@ -236,22 +240,45 @@ class ChannelMerger:
             self.dropped += lo - self._cursor
             self._cursor = lo
 
+    def _apply_pending(self) -> None:
+        if self._pending is not None and self._cursor >= self._pending[0]:
+            self.offset, self._pending = self._pending[1], None
+
+    @property
+    def latest_offset(self) -> int:
+        """The offset of the newest audio (the current one unless a slip ahead of the cursor is pending)."""
+        return self.offset if self._pending is None else self._pending[1]
+
     def available(self) -> int:
         """Aligned samples per channel that ``pop`` can return now."""
+        self._apply_pending()
         self._clamp_cursor()
-        return max(0, min(self._end(0) - self._cursor, self._end(1) - (self._cursor + self.offset)))
+        c = self._cursor
+        n = max(0, min(self._end(0) - c, self._end(1) - (c + self.offset)))
+        if self._pending is not None and n >= self._pending[0] - c:
+            at, new = self._pending
+            n = max(at - c, min(self._end(0) - c, self._end(1) - (c + new)))
+        return n
 
     def lacking(self, n: int) -> int | None:
         """The device whose data ``pop(n)`` waits for most (0/1), or None if ``n`` samples are ready."""
         if self.available() >= n:
             return None
-        need = [self._cursor + n - self._end(0), self._cursor + self.offset + n - self._end(1)]
+        c = self._cursor
+        need1 = c + self.offset + n - self._end(1)
+        if self._pending is not None and c + n > self._pending[0]:
+            at, new = self._pending
+            need1 = max(at + self.offset - self._end(1), c + n + new - self._end(1))
+        need = [c + n - self._end(0), need1]
         return int(np.argmax(need))
 
     def pop(self, n: int) -> np.ndarray | None:
         """The next ``n`` aligned samples, shape (n_outputs, n); None if not yet available."""
         if self.available() < n:
             return None
+        if self._pending is not None and self._cursor + n > self._pending[0]:
+            k = self._pending[0] - self._cursor      # up to the slip with the old offset, then the new one
+            return np.concatenate([self.pop(k), self.pop(n - k)], axis=1)
         segs = []
         for d in (0, 1):
             a = self._cursor + (self.offset if d else 0) - self._start[d]
@@ -266,6 +293,8 @@ class ChannelMerger:
     def discard_pending(self) -> int:
         """Skip everything buffered but not yet popped (stale audio); returns the samples skipped."""
         before = self._cursor
+        if self._pending is not None:   # the newest audio is past the slip
+            self.offset, self._pending = self._pending[1], None
         self._cursor = max(self._cursor, min(self._end(0), self._end(1) - self.offset))
         return self._cursor - before
 
@@ -278,18 +307,23 @@ class ChannelMerger:
         keep = int(self.config.history_s * self.fs)
         # History is kept behind the newest audio BOTH devices have (device-0 index): a device that runs ahead
         # (e.g. delivered a burst) must not drop the span the lagging one needs for the offset estimate.
-        common_end = min(self._end(0), self._end(1) - self.offset)
+        lo_offset = min(self.offset, self.latest_offset)
+        common_end = min(self._end(0), self._end(1) - lo_offset)
         for d in (0, 1):
-            shift = self.offset if d else 0
+            shift = lo_offset if d else 0
             cut = min(self._cursor + shift, common_end + shift - keep) - self._start[d]
             if cut > 0:
                 self._buf[d] = self._buf[d][:, cut:]
                 self._start[d] += cut
 
     # -- offset -----------------------------------------------------------------
-    def set_offset(self, offset: int) -> None:
-        """Use ``offset`` samples (device-1 index minus device-0 index) from the next pop on."""
-        self.offset = int(offset)
+    def set_offset(self, offset: int, from_index: int | None = None) -> None:
+        """Use ``offset`` samples (device-1 index minus device-0 index) from the next pop on, or from device-0
+        stream index ``from_index`` on when that is still ahead of the cursor."""
+        if from_index is None or from_index <= self._cursor:
+            self.offset, self._pending = int(offset), None
+        else:
+            self._pending = (int(from_index), int(offset))
 
     def estimate_offset(self, window_s: float = 0.5, search_s: float | None = None,
                         centre: int | None = None) -> OffsetEstimate:
@@ -300,7 +334,7 @@ class ChannelMerger:
         result; see ``calibrate``. ``centre``: search around this offset instead of the current one.
         """
         cfg = self.config
-        k = self.offset if centre is None else int(centre)
+        k = self.latest_offset if centre is None else int(centre)
         search = cfg.max_offset_s if search_s is None else float(search_s)
         L = int(round(window_s * self.fs))
         m = int(np.ceil(search * self.fs))
@@ -329,7 +363,27 @@ class ChannelMerger:
                 delta_s, direction, fit_res = self._refine(seg0, as_float_audio(self._buf[1][:, b:b + L]))
                 exact = coarse + delta_s * self.fs
                 confident = fit_res <= cfg.max_fit_residual_s
-        return OffsetEstimate(int(round(exact)), float(exact), peak, fit_res, direction, bool(confident))
+        return OffsetEstimate(int(round(exact)), float(exact), peak, fit_res, direction, bool(confident), (a, a + L))
+
+    def _slip_start(self, old: int, new: int, window: tuple[int, int], seg: int = 1024) -> int:
+        """Device-0 index from which the offset is ``new`` rather than ``old``: the start of the first 64 ms
+        segment between the cursor and the end of the measuring ``window`` whose coarse GCC-PHAT lag (on the
+        reference channels) is confidently nearer ``new``; the window's start if none is."""
+        cfg = self.config
+        r0, r1 = cfg.reference
+        lo_lag, hi_lag = min(old, new) - 4, max(old, new) + 4
+        first = max(self._cursor, self._start[0], self._start[1] - lo_lag)
+        last = min(window[1], self._end(0), self._end(1) - hi_lag) - seg
+        expected = cfg.expected_tdoa_s * self.fs
+        for s0 in range(first, last + 1, seg):
+            x = as_float_audio(self._buf[0][r0, s0 - self._start[0]:s0 - self._start[0] + seg])
+            b = s0 + lo_lag - self._start[1]
+            y = as_float_audio(self._buf[1][r1, b:b + seg + hi_lag - lo_lag])
+            lag, peak = gcc_phat_lag(x, y, self.fs, (0, hi_lag - lo_lag), cfg.band_hz)
+            k = lo_lag + lag - expected
+            if peak >= cfg.min_peak and abs(k - new) < abs(k - old):
+                return s0
+        return window[0]
 
     def _refine(self, seg0: np.ndarray, seg1: np.ndarray) -> tuple[float, np.ndarray, float]:
         cmap = self.config.channel_map
@@ -364,22 +418,26 @@ class ChannelMerger:
         room the whole-range search alone locked an 80-sample slip to a reflection 4 samples off."""
         hinted = None
         if slip is not None and math.isfinite(slip):
-            hinted = self.estimate_offset(window_s, search_s, centre=self.offset + int(round(slip)))
+            hinted = self.estimate_offset(window_s, search_s, centre=self.latest_offset + int(round(slip)))
             hinted = hinted if hinted.confident else None
         est = hinted or self.estimate_offset(window_s, search_s)
-        at_edge = abs(est.offset_exact - self.offset) >= search_s * self.fs - 1.5
+        at_edge = abs(est.offset_exact - self.latest_offset) >= search_s * self.fs - 1.5
         if hinted is None and (not est.confident or at_edge):
             est = self.estimate_offset(window_s, self.config.max_offset_s)
-        if not est.confident or est.offset == self.offset:
+        current = self.latest_offset
+        if not est.confident or est.offset == current:
             return None
-        jump = est.offset - self.offset
+        jump = est.offset - current
         if abs(jump) > 2:  # beyond clock drift between two tracks
             self.slips += 1
-            log.warning("audio devices slipped by %+d samples (%.1f ms): offset %d -> %s", jump,
-                        1e3 * jump / self.fs, self.offset, est)
+            at = self._slip_start(current, est.offset, est.window) if est.window else None
+            log.warning("audio devices slipped by %+d samples (%.1f ms): offset %d -> %s%s", jump,
+                        1e3 * jump / self.fs, current, est,
+                        f", from sample {at}" if at is not None and at > self._cursor else "")
+            self.set_offset(est.offset, from_index=at)
         else:
-            log.info("device offset drifted %d -> %s", self.offset, est)
-        self.set_offset(est.offset)
+            log.info("device offset drifted %d -> %s", current, est)
+            self.set_offset(est.offset)
         self.estimate = est
         return est
 
