@@ -239,6 +239,14 @@ def _markdown(rows: list[dict]) -> str:
     return "\n".join(lines)
 
 
+def _family(scenario: str) -> str:
+    try:
+        from ssl_sim.suite import family_of
+        return family_of(scenario)
+    except (ImportError, ValueError):
+        return scenario
+
+
 def main(argv: list[str] | None = None) -> int:
     ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
     ap.add_argument("--seeds", default="0:8", help="START:STOP (stop exclusive) or a comma list (with --suite: "
@@ -252,6 +260,8 @@ def main(argv: list[str] | None = None) -> int:
                     "shipped scenarios (ssl_sim.suite.write_scenarios)")
     ap.add_argument("--count", type=int, default=None, help="with --suite: only its first COUNT scenarios")
     ap.add_argument("--results-name", default="rescue", help="write benchmarks/results/NAME.json (_results.py); '' for none")
+    ap.add_argument("--tables-only", action="store_true",
+                    help="run nothing: only tabulate the rows of --rows-in (e.g. to re-render an earlier run)")
     ap.add_argument("--rows-out", default=None, help="also write every run's row (JSON) here")
     ap.add_argument("--rows-in", nargs="*", default=(), help="rows files of earlier runs to add to the tables")
     ap.add_argument("--blas", default=None,
@@ -273,7 +283,7 @@ def main(argv: list[str] | None = None) -> int:
     with tempfile.TemporaryDirectory() as d:
         tmp = Path(d)
         only = args.scenarios.split(",") if args.scenarios else None
-        suite_files, families = None, {}
+        suite_files = None
         if args.suite:
             if args.scenarios:
                 raise SystemExit("bench_rescue.py: --suite and --scenarios exclude each other")
@@ -285,10 +295,6 @@ def main(argv: list[str] | None = None) -> int:
             suite_files = [Path(p) for p in write_scenarios(args.suite, tmp / "suite", args.count)]
             if "--seeds" not in (argv if argv is not None else sys.argv[1:]):
                 seeds = [-1]    # a suite scenario is complete with its seed
-            from ssl_sim.scenario import load_scenario
-            for p in suite_files:   # the family each scenario is summarized under
-                sc = load_scenario(p)
-                families[sc.name] = getattr(sc, "family", None) or sc.name
         new_paths = _scenario_paths(tmp, old=False, only=only, files=suite_files)
         old_paths: list[str] = []
         base_src = None
@@ -306,7 +312,7 @@ def main(argv: list[str] | None = None) -> int:
             old_paths = _scenario_paths(tmp, old=True, only=only, files=suite_files)
         rows: dict[str, list[dict]] = {"new": []}
         try:
-            for blas in kernels:
+            for blas in ([] if args.tables_only else kernels):
                 # Both versions at once (each with ``workers`` processes): the same seeds, scenario files, kernels.
                 jobs = {"new": _start_version(ROOT / "src", new_paths, seeds, args.workers, tmp, "new", blas)}
                 if base_src is not None:
@@ -325,8 +331,8 @@ def main(argv: list[str] | None = None) -> int:
         seeds = sorted({r["seed"] for r in rows["new"]})
     from ssl_sim import stats
     for rs in rows.values():
-        for r in rs:
-            r["family"] = families.get(r["scenario"], r["scenario"])
+        for r in rs:   # the family each run is summarized under: a suite scenario's scene family, else its name
+            r["family"] = _family(r["scenario"])
     new, old = _table(rows["new"]), (_table(rows["old"]) if "old" in rows else None)
     summary = {tag: stats.summarize(rs) for tag, rs in rows.items()}
     paired = stats.paired_comparison(rows["new"], rows["old"]) if "old" in rows else None

@@ -62,12 +62,13 @@ def load_results(results_dir: Path = RESULTS_DIR) -> list[dict]:
 def _where(doc: dict) -> str:
     m = doc["machine"]
     blas = "; ".join(m.get("blas") or ["unknown"])
-    core = m.get("openblas_coretype") or "the CPU's own choice"
+    core = doc.get("openblas_coretype", m.get("openblas_coretype")) or "the CPU's own choice"
+    numpy = m.get("packages", {}).get("numpy") or m.get("numpy", "?")
     load = doc["load_avg"]
     argv = " ".join(doc.get("argv") or []) or "(defaults)"
     return (f"Measured {doc.get('utc', '?')} at commit `{doc['commit']}`{' with local changes' if doc.get('dirty') else ''}"
             f" on {m.get('cpu', '?')} ({m.get('cores', '?')} cores), Python {m.get('python', '?')}, numpy "
-            f"{m.get('numpy', '?')}, BLAS {blas}, OpenBLAS kernels: {core}; load average "
+            f"{numpy}, BLAS {blas}, OpenBLAS kernels: {core}; load average "
             f"{load['start'][0]:.1f} at the start, {load['end'][0]:.1f} at the end. Arguments: `{argv}`.")
 
 
