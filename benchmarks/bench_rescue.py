@@ -46,7 +46,6 @@ from pathlib import Path  # noqa: E402
 import numpy as np  # noqa: E402
 
 from _blas_kernel import check_kernels, default_kernel  # noqa: E402
-from _results import write_result  # noqa: E402
 
 ROOT = Path(__file__).resolve().parents[1]
 SCENARIOS = ["paper_lab", "light_rubble_three", "dense_pump", "behind_partition", "half_buried_slab"]
@@ -99,7 +98,9 @@ def _one(path: str, seed: int, time_limit: float | None) -> dict:
             for ev in events:
                 if ev.decision is Decision.VICTIM_FOUND:
                     _, x, y, _, _ = run._pose_at(ev.time)
-                    j = judge.declare(ev.time, ev.data.position, (x, y))
+                    # the reported position: a typed payload, or the plain dict older versions emit
+                    pos = ev.data["position"] if isinstance(ev.data, dict) else ev.data.position
+                    j = judge.declare(ev.time, pos, (x, y))
                     if j.kind == "find":
                         finds.append((j.victim, (x, y), run._path_at(ev.time)))
     finally:
@@ -354,7 +355,7 @@ def main(argv: list[str] | None = None) -> int:
     for title, text in tables.items():
         print(f"{title}:\n{text}\n")
     if args.results_name:
-        from _results import write_result
+        from _results import write_result   # here, not at the top: a baseline worker runs an older ssl_sim
         overall = next(r for r in summary["new"] if r["family"] == "all") if len(summary["new"]) > 1 \
             else summary["new"][0]
         figures = {f"{k}": overall[k] for k in overall if k not in ("family",) and overall[k] is not None}
