@@ -56,6 +56,17 @@ class _BadInput(Exception):
     """One-line message for stderr; exit code 2."""
 
 
+def _unreadable(label: str, exc: OSError, expected: str) -> _BadInput:
+    """Why the file ``label`` (the path, or the option and path) could not be opened, in one line."""
+    if isinstance(exc, FileNotFoundError):
+        return _BadInput(f"{label}: no such file")
+    if isinstance(exc, IsADirectoryError):
+        return _BadInput(f"{label}: is a directory, expected {expected}")
+    if isinstance(exc, PermissionError):
+        return _BadInput(f"{label}: permission denied")
+    return _BadInput(f"{label}: cannot read: {exc.strerror or exc}")
+
+
 def _parser() -> argparse.ArgumentParser:
     p = argparse.ArgumentParser(prog="ssl-locate", description=__doc__,
                                 formatter_class=argparse.RawDescriptionHelpFormatter)
@@ -91,14 +102,8 @@ def _open(path: str):
 
     try:
         return wav_info(path)
-    except FileNotFoundError:
-        raise _BadInput(f"{path}: no such file")
-    except IsADirectoryError:
-        raise _BadInput(f"{path}: is a directory, expected a WAV file")
-    except PermissionError:
-        raise _BadInput(f"{path}: permission denied")
     except OSError as exc:
-        raise _BadInput(f"{path}: cannot read: {exc.strerror or exc}")
+        raise _unreadable(path, exc, "a WAV file") from None
     except ValueError as exc:
         raise _BadInput(str(exc))
 
@@ -203,12 +208,8 @@ def _truth(args, info):
     try:
         with open(path, encoding="utf-8") as f:
             data = json.load(f)
-    except FileNotFoundError:
-        raise _BadInput(f"--truth {path}: no such file")
-    except IsADirectoryError:
-        raise _BadInput(f"--truth {path}: is a directory, expected the truth JSON of a recording")
     except OSError as exc:
-        raise _BadInput(f"--truth {path}: cannot read: {exc.strerror or exc}")
+        raise _unreadable(f"--truth {path}", exc, "the truth JSON of a recording") from None
     except (json.JSONDecodeError, UnicodeDecodeError) as exc:
         raise _BadInput(f"--truth {path}: not a JSON file ({exc})")
     try:
