@@ -83,7 +83,9 @@ def _parser() -> argparse.ArgumentParser:
 _SECTIONS = {"motion": "robot.motion:MotionConfig", "sound_map": "robot.sound_map:SoundMapConfig",
              "planner": "robot.planner:PlannerConfig", "occupancy": "robot.occupancy:OccupancyConfig",
              "gyro": "robot.odometry:GyroFusionConfig", "travel": "robot.odometry:TravelConfig",
-             "coverage": "robot.coverage:CoverageConfig", "mount": "robot.mount:ArrayMount"}
+             "coverage": "robot.coverage:CoverageConfig", "mount": "robot.mount:ArrayMount",
+             "pursuit": "robot.pursuit:PursuitConfig", "options": "robot.options:OptionsConfig",
+             "recovery": "robot.recovery:RecoveryConfig"}
 
 
 def section_config(section: str) -> type:

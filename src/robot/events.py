@@ -57,12 +57,14 @@ FINAL = frozenset({Decision.ALL_FOUND, Decision.STUCK, Decision.FAULT, Decision.
 
 
 class FindCriterion(StrEnum):
-    """Which found cue declared a victim; the value is its keyword in ``results.json`` (``finds_by_criterion``)."""
+    """The cue that added most to a find's probability (``robot.found``); the value is its keyword in
+    ``results.json`` (``finds_by_criterion``)."""
 
-    STEEP_BEARING = "steep_bearing"    # (1) the bearing heard now is steeper than found_elevation_deg
-    LEVEL_RISE = "level_rise"          # (2) steeper than corroborated_elevation_deg and louder by level_rise_db
-    MAP_ESTIMATE = "map_estimate"      # (3) the map puts it within cue_distance_m, tight, the bearing pointing down
-    CONTACT = "contact"                # (4) the bumper or the range sensors stopped a move at a voiced target
+    STEEP_BEARING = "steep_bearing"    # the bearing heard now points down at a mouth where the map puts her
+    LEVEL_RISE = "level_rise"          # her level rose since her faintest listen
+    MAP_ESTIMATE = "map_estimate"      # the map's tight estimate near the robot
+    CONTACT = "contact"                # the bumper or the range sensors stopped a move at her estimate
+    VOICE = "voice"                    # the map's voice evidence added most to P(find)
 
 
 @dataclass(frozen=True)

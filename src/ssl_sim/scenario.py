@@ -47,6 +47,9 @@ of the robot start in radians. Example (``ssl_sim/scenarios/paper_lab.toml``)::
     [planner]                # robot.planner PlannerConfig fields
     [occupancy]              # robot.occupancy OccupancyConfig fields
     [coverage]               # robot.coverage CoverageConfig fields (area: the room's floor unless given)
+    [pursuit]                # robot.pursuit PursuitConfig fields (per-source pursuit limits)
+    [options]                # robot.options OptionsConfig fields (valuing approach / explore)
+    [recovery]               # robot.recovery RecoveryConfig fields (escape)
 
 Every error names the file and the field (``paper_lab.toml: victims[0].position: ...``).
 """
@@ -63,6 +66,9 @@ import numpy as np
 from robot.config_values import check_scalar, field_values, in_section
 from robot.motion import MotionConfig
 from robot.coverage import CoverageConfig
+from robot.options import OptionsConfig
+from robot.pursuit import PursuitConfig
+from robot.recovery import RecoveryConfig
 from robot.occupancy import OccupancyConfig
 from robot.planner import PlannerConfig
 from robot.rescue import RescueConfig
@@ -168,12 +174,16 @@ class Scenario:
     planner: PlannerConfig = field(default_factory=PlannerConfig)
     occupancy: OccupancyConfig = field(default_factory=OccupancyConfig)
     coverage: CoverageConfig = field(default_factory=CoverageConfig)
+    pursuit: PursuitConfig = field(default_factory=PursuitConfig)
+    options: OptionsConfig = field(default_factory=OptionsConfig)
+    recovery: RecoveryConfig = field(default_factory=RecoveryConfig)
     path: str = ""
 
     def stage_configs(self) -> dict[str, Any]:
         """The behaviour's per-stage configs as ``RescueBehaviour`` keyword arguments."""
         return {"motion": self.motion, "sound_map": self.sound_map, "planner": self.planner,
-                "occupancy": self.occupancy, "coverage": self.coverage}
+                "occupancy": self.occupancy, "coverage": self.coverage, "pursuit": self.pursuit,
+                "options": self.options, "recovery": self.recovery}
 
     # -- building the run's objects ---------------------------------------------------------
     def with_overrides(self, seed: int | None = None, time_limit_s: float | None = None) -> "Scenario":
@@ -370,7 +380,7 @@ def _resample(x: np.ndarray, fs_in: int, fs_out: int) -> np.ndarray:
 # ----------------------------------------------------------------------------- parsing
 _TOP_KEYS = {"name", "description", "seed", "time_limit_s", "success_radius_m", "scene", "robot", "victims",
              "interferers", "noise", "acoustics", "localizer", "behaviour", "motion", "sound_map", "planner",
-             "occupancy", "coverage", "ego_noise"}
+             "occupancy", "coverage", "pursuit", "options", "recovery", "ego_noise"}
 
 
 def scenario_names() -> list[str]:
@@ -472,7 +482,8 @@ def parse_scenario(data: dict, base_dir: str | Path = ".", path: str = "") -> Sc
         raise err(f"behaviour.listen_s: {behaviour.listen_s} s is shorter than one localizer frame")
     stages = {key: _dataclass(cls, _table(data, key, where), key, where)
               for key, cls in (("motion", MotionConfig), ("sound_map", SoundMapConfig), ("planner", PlannerConfig),
-                               ("occupancy", OccupancyConfig), ("coverage", CoverageConfig))}
+                               ("occupancy", OccupancyConfig), ("coverage", CoverageConfig),
+                               ("pursuit", PursuitConfig), ("options", OptionsConfig), ("recovery", RecoveryConfig))}
     return Scenario(name=name, scene=scene, victims=victims, interferers=interferers,
                     description=_get(data, "description", str, where, default=""), seed=seed,
                     time_limit_s=time_limit, robot_start=start, noise=noise, ego_noise=ego_noise,
