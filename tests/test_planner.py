@@ -64,47 +64,6 @@ def _src(i, xy, p, cls, state=SourceState.UNVISITED, last=10.0):
     return MapSource(i, np.array([*xy, 0.1]), np.eye(3) * 0.01, p, cls, state, 5, 5, 0.0, last, -30.0, -30.0, ())
 
 
-def test_target_prefers_victims_interferers_last_never_found_or_rejected():
-    g = OccupancyGrid()
-    pump = _src(0, (0.8, 0.0), 0.05, SourceClass.INTERFERER)
-    far_victim = _src(1, (3.0, 0.0), 0.9, SourceClass.VICTIM)
-    found = _src(2, (1.0, 1.0), 0.95, SourceClass.VICTIM, SourceState.FOUND)
-    unknown = _src(3, (-0.5, -1.0), 0.5, SourceClass.UNKNOWN)   # 1.6 m from the pump: not its image
-    pl = Planner()
-    s, plan, why = pl.choose_target([pump, far_victim, found, unknown], g, (0.0, 0.0, 0.0), 12.0)
-    assert s.id == 1 and plan is not None          # the far victim, not the near pump or unknown source
-    s, _, _ = pl.choose_target([pump, found, unknown], g, (0.0, 0.0, 0.0), 12.0)
-    assert s.id == 3                                # no victim: the unclassified one, not the pump
-    s, _, why = pl.choose_target([pump, found], g, (0.0, 0.0, 0.0), 12.0)
-    assert s.id == 0 and "check" in why             # only a machine mapped: go and check it
-    rejected = _src(0, (0.8, 0.0), 0.05, SourceClass.INTERFERER, SourceState.REJECTED)
-    s, plan, _ = pl.choose_target([rejected, found], g, (0.0, 0.0, 0.0), 12.0)
-    assert s is None and plan is None
-
-
-def test_a_voiceless_source_mapped_outside_the_search_area_is_no_target():
-    """A room from (-1, -1) to (4, 3): an unclassified source estimated 1 m beyond its east wall (a mirror image
-    in it) is not approached; inside the room it is, and so is one classified victim beyond the wall."""
-    g = OccupancyGrid()
-    room = (-1.0, -1.0, 4.0, 3.0)
-    image = _src(0, (5.0, 0.0), 0.42, SourceClass.UNKNOWN)
-    assert Planner().choose_target([image], g, (0.0, 0.0, 0.0), 12.0, area=room)[0] is None
-    assert Planner().choose_target([image], g, (0.0, 0.0, 0.0), 12.0)[0].id == 0              # no area known
-    inside = _src(1, (3.8, 0.0), 0.42, SourceClass.UNKNOWN)
-    assert Planner().choose_target([image, inside], g, (0.0, 0.0, 0.0), 12.0, area=room)[0].id == 1
-    voiced = _src(2, (5.0, 1.0), 0.9, SourceClass.VICTIM)
-    assert Planner().choose_target([image, voiced], g, (0.0, 0.0, 0.0), 12.0, area=room)[0].id == 2
-
-
-def test_current_target_kept_unless_clearly_better():
-    g = OccupancyGrid()
-    a = _src(0, (2.0, 0.0), 0.8, SourceClass.VICTIM)
-    b = _src(1, (0.0, 1.8), 0.8, SourceClass.VICTIM)
-    pl = Planner(PlannerConfig(keep_factor=1.5))
-    assert pl.choose_target([a, b], g, (0, 0, 0), 10.0, current=0)[0].id == 0
-    assert pl.choose_target([a, b], g, (0, 0, 0), 10.0, current=1)[0].id == 1
-
-
 def test_explore_goes_to_unheard_floor_away_from_found_victims():
     g = OccupancyGrid()
     g.mark_path((-3.0, 0.0), (0.0, 0.0))               # came from -x, listening every 0.6 m
@@ -195,34 +154,3 @@ def test_explore_listens_out_of_a_machine_s_masking_and_frontier_goals_stay_near
     assert np.hypot(*(plan[0].waypoints[-1] - machine[0])) >= cov.config.masked_within_m, why
 
 
-def test_machine_image_needs_no_voice_and_the_machine_near_or_on_its_bearings():
-    from robot.sound_map import Listen
-    pump = _src(0, (3.0, 0.0), 0.05, SourceClass.INTERFERER)
-    ray = Listen(1.0, (0.0, 0.0, 0.3), (1.0, 0.0, 0.0), None, 0.42, -40.0, 1.0)   # heard toward the pump
-    voiced = Listen(2.0, (0.0, 0.0, 0.3), (1.0, 0.0, 0.0), None, 0.9, -40.0, 1.0)
-    off = Listen(1.0, (0.0, 0.0, 0.3), (0.0, 1.0, 0.0), None, 0.42, -40.0, 1.0)    # 90 deg off the pump
-    beyond = MapSource(1, np.array([6.0, 0.0, 0.1]), np.eye(3), 0.4, SourceClass.UNKNOWN, SourceState.UNVISITED,
-                       1, 1, 0.0, 1.0, -40.0, -40.0, (ray,))
-    pl = Planner()
-    assert pl.machine_image(beyond, [pump])                       # 3 m beyond the pump, on its bearing
-    assert not pl.machine_image(dataclasses.replace(beyond, history=(ray, voiced)), [pump])   # a voice was heard
-    aside = dataclasses.replace(beyond, position=np.array([0.0, 2.0, 0.1]), history=(off,))
-    assert not pl.machine_image(aside, [pump])                    # 3.6 m from it, heard 90 deg off its bearing
-    near = dataclasses.replace(aside, position=np.array([3.0, 1.2, 0.1]))
-    assert pl.machine_image(near, [pump])                         # 1.2 m from it
-
-
-def test_an_unclassified_source_heard_once_is_no_target_a_victim_heard_once_is():
-    """One voiceless peak (beside a machine mostly its reflection) is not worth a trip until heard again; one
-    listen with speech is."""
-    g = OccupancyGrid()
-    once = dataclasses.replace(_src(0, (1.5, 0.0), 0.42, SourceClass.UNKNOWN), n_listens=1, n_inliers=1)
-    s, plan, why = Planner().choose_target([once], g, (0.0, 0.0, 0.0), 12.0)
-    assert s is None and plan is None and "no unfound source" in why
-    twice = dataclasses.replace(once, n_listens=2, n_inliers=2)
-    assert Planner().choose_target([twice], g, (0.0, 0.0, 0.0), 12.0)[0].id == 0
-    voiced = dataclasses.replace(once, id=1, victim_probability=0.9, cls=SourceClass.VICTIM)
-    assert Planner().choose_target([once, voiced], g, (0.0, 0.0, 0.0), 12.0)[0].id == 1
-    assert Planner(PlannerConfig(min_unknown_listens=1)).choose_target([once], g, (0.0, 0.0, 0.0), 12.0)[0].id == 0
-    with pytest.raises(ValueError, match="min_unknown_listens"):
-        PlannerConfig(min_unknown_listens=0)

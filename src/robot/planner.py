@@ -1,18 +1,9 @@
-"""Where to go next: the target among the mapped sources, a path to it on the learned occupancy grid, and an
-exploration goal when the map holds no unfound victim.
+"""Where to drive: a path on the learned occupancy grid to a source's goal, and exploration goals.
 
 Frames: world/odometry frame (x, y in m). Inputs are the ``SoundMap``'s sources and the ``OccupancyGrid``.
 
-* **target** (``choose_target``): unfound sources classified victim; while none is, unknown sources (not yet
-  classified: a caller who has not called long enough) heard in ``min_unknown_listens`` listens; interferers
-  only when nothing else is mapped (never approach a non-voice source while a voice source exists),
-  to check them from close up, where the behaviour rejects them for good if still no voice is heard.
-  Utility = P(victim) x exp(-age / ``recency_s``) / (1 + path length / ``distance_scale_m``)
-  / (1 + 1-sigma / ``sigma_scale_m``) (a single bearing's guess counts less than a triangulated source), the current
-  target's utility times ``keep_factor`` (no dithering between two callers: measured, the reactive behaviour
-  made 21 turns between two intermittent callers on light_rubble_three seed 6). A source never heard with speech
-  beside a mapped interferer, or heard along its line, is taken for that machine's image and not approached
-  (``machine_image``); nor is an interferer checked that images one checked already.
+* **goal for a source** (``goal_of``): its estimate, or while its range is open a probe across its bearing
+  (which source is worth going to is ``robot.options``'s choice).
 * **path** (``plan``): Dijkstra (``scipy.sparse.csgraph``) on the grid's free cells (unknown counts as
   free: obstacles are known only where touched or seen by the range sensors), 16-connected, to the nearest cell within ``stop_radius`` of the goal;
   then shortened to line-of-sight waypoints.
@@ -26,7 +17,7 @@ from __future__ import annotations
 
 import math
 from dataclasses import dataclass
-from typing import Sequence
+from typing import ClassVar, Sequence
 
 import numpy as np
 from scipy import ndimage, sparse
@@ -35,7 +26,7 @@ from scipy.sparse.csgraph import dijkstra
 from robot.config_values import need
 from robot.coverage import ListeningCoverage
 from robot.occupancy import OccupancyGrid
-from robot.sound_map import MapSource, SourceClass, SourceState
+from robot.sound_map import MapSource
 
 __all__ = ["PlannerConfig", "Planner", "Plan", "grid_graph"]
 
@@ -80,60 +71,31 @@ def grid_graph(free: np.ndarray, res: float) -> tuple[sparse.csr_matrix, np.ndar
 
 @dataclass(frozen=True)
 class PlannerConfig:
-    recency_s: float = 60.0            # a source unheard this long counts 1/e as much
-    distance_scale_m: float = 3.0      # path length that halves a target's utility
-    keep_factor: float = 1.5           # the current target's (and frontier goal's) utility is multiplied by this
-    sigma_scale_m: float = 0.5         # position uncertainty (1 sigma) that halves a target's utility
-    stale_s: float = 45.0              # a source not classified victim and unheard this long is no target
-    max_sigma_m: float = 20.0          # not a target while more uncertain (a bearing above the horizon: no range)
+    distance_scale_m: float = 3.0      # path length that halves an exploration goal's worth (frontier vs ring)
+    keep_factor: float = 1.5           # the current choice's value is multiplied by this (hysteresis: robot.options)
     probe_sigma_m: float = 1.0         # more uncertain than this: drive probe_distance_m along its bearing
     probe_distance_m: float = 1.5      # how far a probe drives along an unranged source's bearing
     probe_angle_deg: float = 30.0      # ... that far off the bearing (a baseline for triangulation)
-    min_listens: int = 2               # an interferer is checked once heard this often (not a stray reflection)
-    # An unclassified source (no voice heard) is a target once heard in this many listens: one listen's peak beside
-    # a machine is mostly its reflection. Measured in dense_pump: chases of voiceless sources whose rays pointed at
-    # no source took 29 % of the runs' time, most begun on one ray (docs/design/behaviour.md, "Machine images are
-    # not targets"). Below it, the behaviour listens again or explores: a caller who
-    # only moans or knocks is heard twice as it passes.
-    min_unknown_listens: int = 2
     stop_radius_m: float = 0.35        # plan to within this of a source's estimate
-    unreachable_retry_s: float = 60.0  # a target without a path (or that bumps too often) is skipped this long
     explore_distance_m: float = 1.2    # exploration candidates lie this far from the robot
     explore_headings: int = 16         # ... in this many directions
-    # An unclassified source never heard with speech this close to a mapped interferer is taken for its image
-    # (reflections off the rubble around a machine) and not approached: dense_pump seed 0 chased five
-    # voiceless sources 0.9-1.5 m from the pump for 150 s, rejecting each from close up.
-    machine_image_radius_m: float = 1.5
-    image_bearing_deg: float = 12.0    # ... or most of its bearings pointed this close to the machine (the sound
-    #                                    map's inlier_deg: a bearing this close supports the machine's position)
     # A frontier goal is unvisited floor at most this far from floor the robot has covered (Yamauchi's frontier:
-    # known floor meets unknown). Touch maps walls only where met, so a cell deep in the unknown may lie beyond one:
-    # dense_pump seed 2 (with the away-from-machine bonus) drove for 80 s at frontier goals 1.5 m outside the room.
+    # known floor meets unknown). Touch maps walls only where met, so a cell deep in the unknown may lie beyond one.
     frontier_reach_m: float = 0.6
-    # A source not heard with voice whose estimate lies this far outside the search area is no target: a mirror
-    # image in a wall (or a machine beyond it); one voice-classified stays a target (its probe triangulates it).
-    # Measured, dense_pump seed 3 with the listening coverage: 3 of the 11 unknown sources it approached, for
-    # 66 of its 300 s, had estimates 1.6-2.3 m outside the 7 x 6 m room.
-    area_margin_m: float = 0.5
+
+    #: Fields that no longer exist (robot.config_values.field_values): ignored with a warning.
+    RETIRED: ClassVar[dict[str, str]] = {name: "no decision reads it: targets are valued by robot.options" for name in (
+        "recency_s", "sigma_scale_m", "stale_s", "max_sigma_m", "min_listens", "min_unknown_listens",
+        "unreachable_retry_s", "machine_image_radius_m", "image_bearing_deg", "area_margin_m")}
 
     def __post_init__(self) -> None:
-        need(self, self.recency_s > 0, "recency_s", "> 0 s")
         need(self, self.distance_scale_m > 0, "distance_scale_m", "> 0 m")
         need(self, self.keep_factor >= 1, "keep_factor", ">= 1")
-        need(self, self.sigma_scale_m > 0, "sigma_scale_m", "> 0 m")
-        need(self, self.max_sigma_m > 0, "max_sigma_m", "> 0 m")
         need(self, self.probe_sigma_m > 0 and self.probe_distance_m > 0, "probe_sigma_m", "> 0 m (and probe_distance_m)")
-        need(self, self.stale_s > 0, "stale_s", "> 0 s")
-        need(self, self.min_listens >= 1, "min_listens", "an integer >= 1")
-        need(self, self.min_unknown_listens >= 1, "min_unknown_listens", "an integer >= 1")
         need(self, self.stop_radius_m >= 0, "stop_radius_m", ">= 0 m")
-        need(self, self.unreachable_retry_s >= 0, "unreachable_retry_s", ">= 0 s")
         need(self, self.explore_distance_m > 0, "explore_distance_m", "> 0 m")
         need(self, self.explore_headings >= 4, "explore_headings", "an integer >= 4")
-        need(self, self.machine_image_radius_m >= 0, "machine_image_radius_m", ">= 0 m")
         need(self, self.frontier_reach_m > 0, "frontier_reach_m", "> 0 m")
-        need(self, self.area_margin_m >= 0, "area_margin_m", ">= 0 m")
-        need(self, 0 <= self.image_bearing_deg < 90, "image_bearing_deg", "in [0, 90) degrees")
 
 
 @dataclass(frozen=True)
@@ -159,7 +121,6 @@ class Planner:
     def __init__(self, config: PlannerConfig = PlannerConfig()) -> None:
         self.config = config
         self._graph: _Graph | None = None
-        self._unreachable: dict[int, float] = {}   # source id -> time its plan failed
         self._frontier: np.ndarray | None = None    # the frontier cell being explored toward (world x, y)
 
     # -- paths ----------------------------------------------------------------------------
@@ -265,84 +226,6 @@ class Planner:
         a = math.atan2(v[1], v[0]) + math.radians(cfg.probe_angle_deg)
         step = min(d, cfg.probe_distance_m)
         return xy + step * np.array([math.cos(a), math.sin(a)])
-
-    def mark_unreachable(self, source_id: int, time: float) -> None:
-        self._unreachable[source_id] = time
-
-    def clear_unreachable(self) -> None:
-        """The grid changed (obstacles forgotten): every source may be reachable again."""
-        self._unreachable.clear()
-
-    def choose_target(self, sources: Sequence[MapSource], grid: OccupancyGrid, pose, time: float,
-                      current: int | None = None, area: tuple[float, float, float, float] | None = None
-                      ) -> tuple[MapSource | None, Plan | None, str]:
-        """The source to approach and the path to it, or (None, None, why). ``area``: the search area
-        (x_min, y_min, x_max, y_max, m, odometry frame), if known."""
-        cfg = self.config
-        open_ = [s for s in sources if s.state not in (SourceState.FOUND, SourceState.REJECTED)
-                 and s.horizontal_sigma_m <= cfg.max_sigma_m
-                 and (s.cls is SourceClass.VICTIM or time - s.last_time <= cfg.stale_s)
-                 and time - self._unreachable.get(s.id, -math.inf) >= cfg.unreachable_retry_s
-                 and (s.cls is SourceClass.VICTIM or _outside(s.position, area) <= cfg.area_margin_m)]
-        victims = [s for s in open_ if s.cls is SourceClass.VICTIM]
-        machines = [s for s in sources if s.cls is SourceClass.INTERFERER and s.n_inliers >= cfg.min_listens]
-        unknown = [s for s in open_ if s.cls is SourceClass.UNKNOWN and s.n_inliers >= cfg.min_unknown_listens
-                   and not self.machine_image(s, machines)]
-        # An interferer is checked from close up only if it is not the image of one checked already (rejected).
-        checked = [s for s in machines if s.state is SourceState.REJECTED]
-        interferers = [s for s in open_ if s.cls is SourceClass.INTERFERER and s.n_inliers >= cfg.min_listens
-                       and not self.machine_image(s, checked)]
-        # Interferers only when nothing else is mapped: reached, they are rejected (a victim whose voice the
-        # VAD missed from afar is heard from close up).
-        pool = victims or unknown or interferers
-        n_int = len(interferers) if pool is not interferers else 0
-        if not pool:
-            return None, None, "no unfound source mapped"
-        search = self.distances(grid, pose[:2])
-        best = None
-        for s in pool:
-            plan = self.plan(grid, pose[:2], self.goal_of(s, pose), _search=search)
-            if plan is None:
-                self.mark_unreachable(s.id, time)
-                continue
-            u = s.victim_probability * math.exp(-max(time - s.last_time, 0.0) / cfg.recency_s) \
-                / (1.0 + plan.length / cfg.distance_scale_m) / (1.0 + s.horizontal_sigma_m / cfg.sigma_scale_m)
-            if s.id == current:
-                u *= cfg.keep_factor
-            if best is None or u > best[0]:
-                best = (u, s, plan)
-        if best is None:
-            return None, None, f"no path to any of {len(pool)} candidate source(s) on the learned grid"
-        u, s, plan = best
-        kind = {SourceClass.VICTIM: "victim", SourceClass.UNKNOWN: "unclassified source",
-                SourceClass.INTERFERER: "interferer (nothing else mapped: go and check)"}[s.cls]
-        why = (f"{kind} #{s.id} at ({s.position[0]:.2f}, {s.position[1]:.2f}) m +- {s.horizontal_sigma_m:.2f} m, "
-               f"P(victim) {s.victim_probability:.2f}, path {plan.length:.2f} m, heard {time - s.last_time:.0f} s ago")
-        if n_int:
-            why += f"; {n_int} interferer(s) mapped, not approached"
-        return s, plan, why
-
-    def machine_image(self, s: MapSource, machines: Sequence[MapSource]) -> bool:
-        """``s`` was never heard with speech and lies within ``machine_image_radius_m`` of one of ``machines``
-        (interferers), or most of its bearings pointed within ``image_bearing_deg`` of one (heard along the
-        machine's line: its estimate's range is then the along-ray guess, often beyond the machine or a wall):
-        most likely that machine's reflection, not worth a trip."""
-        if any(r.voice_probability >= 0.5 for r in s.history):
-            return False
-        cos_max = math.cos(math.radians(self.config.image_bearing_deg))
-        for m in machines:
-            if m.id == s.id:
-                continue
-            if m.distance_to(s.position) <= self.config.machine_image_radius_m:
-                return True
-            if s.history:
-                o = np.array([r.origin[:2] for r in s.history])
-                d = np.array([r.direction[:2] for r in s.history])
-                v = m.position[:2] - o
-                cos = np.sum(v * d, axis=1) / np.maximum(np.hypot(*v.T) * np.hypot(*d.T), 1e-9)
-                if np.mean(cos >= cos_max) > 0.5:
-                    return True
-        return False
 
     def explore_goal(self, grid: OccupancyGrid, pose, coverage: ListeningCoverage, avoid: Sequence[np.ndarray] = (),
                      machines: Sequence[np.ndarray] = ()) -> tuple[Plan | None, str]:

@@ -3,14 +3,12 @@
 - :class:`RandomPolicy`: uniform random actions (seeded).
 - :class:`MapPlanningPolicy`: the rescue behaviour's decision code as a policy: every step's detections
   go into a ``robot.sound_map.SoundMap`` at the dead-reckoned pose, bumps into a
-  ``robot.occupancy.OccupancyGrid``, and ``robot.planner.Planner`` chooses the target (or an exploration
-  goal) and the path, exactly as ``robot.rescue.RescueBehaviour`` does; the action is a twist toward the
-  path's next waypoint. Not used from the behaviour: its listen/act timing and motion primitives (the
-  environment steps the robot) and its found criteria (the environment declares victims found, and the
-  approached source is then marked found in the map). The observation carries no voice evidence, so every
-  source stays unclassified (P(victim) 0.5); the planner therefore takes one heard in a single step for a
-  target (``min_unknown_listens=1``: the behaviour's two listens weigh a voiceless peak against voiced ones,
-  which the observation cannot tell apart).
+  ``robot.occupancy.OccupancyGrid``, and ``robot.options.choose`` picks what is worth most (approach a source,
+  explore, listen) with ``robot.planner.Planner``'s path, as ``robot.rescue.RescueBehaviour`` does; the action is
+  a twist toward the path's next waypoint. Not used from the behaviour: its listen/act timing and motion
+  primitives (the environment steps the robot) and its found model (the environment declares victims found, and
+  the approached source is then marked found in the map). The observation carries no voice evidence, so every
+  source stays unclassified (P(victim) 0.5).
 
 A policy is a callable ``policy(obs) -> action`` with ``reset()`` at episode start.
 """
@@ -27,7 +25,10 @@ from robot.motion import MotionConfig
 from robot.mount import ArrayMount
 from robot.occupancy import OccupancyConfig, OccupancyGrid
 from robot.odometry import wrap_angle
+from robot.found import FoundModel
+from robot.options import OptionKind, OptionsConfig, Timing, choose
 from robot.planner import Planner, PlannerConfig
+from robot.pursuit import PursuitConfig, Pursuits
 from robot.sound_map import SoundMap, SoundMapConfig, SourceClass, SourceState
 from ssl_core.grid import direction_from_angles
 from ssl_sim.envs.config import EnvConfig
@@ -88,12 +89,13 @@ class MapPlanningPolicy:
 
     def __init__(self, env_config: EnvConfig = EnvConfig(), motion: MotionConfig = MotionConfig(),
                  sound_map: SoundMapConfig = SoundMapConfig(),
-                 planner: PlannerConfig = PlannerConfig(min_unknown_listens=1),
+                 planner: PlannerConfig = PlannerConfig(),
                  occupancy: OccupancyConfig = OccupancyConfig()) -> None:
         self.env_config, self.motion_config, self.planner_config = env_config, motion, planner
         self.sound_map_config = sound_map
         self.mount = ArrayMount(height_m=RobotModelConfig().array_height)   # the simulated robot's cube
         self.occupancy_config = occupancy
+        self.options = OptionsConfig(victims_per_m2=float(FoundModel.load().provenance.get("victims_per_m2", 0.05)))
         self.reset()
 
     def reset(self, seed: int | None = None) -> None:
@@ -103,6 +105,7 @@ class MapPlanningPolicy:
         self.grid = OccupancyGrid(self.occupancy_config)
         self.coverage = ListeningCoverage(self.grid.origin, self.grid.n, self.grid.resolution)
         self.planner = Planner(self.planner_config)
+        self.pursuits = Pursuits(PursuitConfig(), FoundModel.load().provenance.get("confirm_probability", 0.3))
         self.target: int | None = None
         self.heading = 0.0            # world direction of the last commanded motion (rad)
 
@@ -122,13 +125,15 @@ class MapPlanningPolicy:
         self.map.update(evidence, self.pose, self.time)
         machines = [s.position[:2] for s in self.map.sources if s.cls is SourceClass.INTERFERER]
         self.coverage.listened(self.pose[:2], machines)
-        src, plan, _ = self.planner.choose_target(self.map.sources, self.grid, self.pose, self.time, self.target)
-        if src is not None:
-            self.target = src.id
-            self.map.set_state(src.id, SourceState.APPROACHING)
-        else:
-            avoid = [s.position[:2] for s in self.map.sources if s.state is SourceState.FOUND]
-            plan, _ = self.planner.explore_goal(self.grid, self.pose, self.coverage, avoid, machines)
+        cycle = env.control_s + env.settle_s + env.listen_s
+        timing = Timing(self.motion_config.drive_speed, cycle, self.motion_config.drive_speed * env.control_s,
+                        self.pursuits.config.confirm_probability, math.radians(self.sound_map_config.bearing_sigma_deg))
+        option = choose(self.map.sources, self.pursuits, self.planner, self.grid, self.coverage, self.pose, self.time,
+                        timing, self.options, self.target)
+        plan = option.plan
+        if option.kind is OptionKind.APPROACH:
+            self.target = option.source.id
+            self.map.set_state(option.source.id, SourceState.APPROACHING)
         if plan is None:
             return np.zeros(3, np.float32)
         goal = plan.waypoints[0]

@@ -1,0 +1,261 @@
+"""Fit the found model (``robot.found``) on the benchmark's train split, and measure its trade-off curve.
+
+    python tools/fit_found_model.py collect [--first 0 --count 48 --workers 2]   # runs -> assessments.csv.gz
+    python tools/fit_found_model.py fit                                         # -> robot/models/found_model.json
+    python tools/fit_found_model.py curve [--first 200 --count 24 --p 0.5 0.7 0.8 0.9 0.95]
+
+``collect`` runs the behaviour on train scenarios (seed = index) and writes every P(find) judgement it made
+(``RescueBehaviour.assessments``: the cues' features per source per listen) with its label from the simulator's
+truth: 1 when a victim not yet found lies within ``FIND_RADIUS_M`` of the report (the map's estimate) and the robot's
+true base within ``BASE_RADIUS_M`` of her (``ssl_sim.scoring``'s find), else 0.
+
+``fit`` fits the weights by L2-regularised logistic regression (scipy.optimize, deterministic), and from the same
+data the per-listen confirm probability (P(a listen at her estimate reaches p_find | she is there)); the prior
+density of victims comes from the train split's generated rooms. It writes the model with its provenance and the
+fit's figures (calibration, weights) into ``experiments/found_model/``.
+
+``curve`` runs other train scenarios (not those fitted on) at several ``p_find`` values and writes false finds per
+run against the mean time to find (``experiments/found_model/p_find_curve.{json,png}``).
+"""
+from __future__ import annotations
+
+import argparse
+import concurrent.futures as cf
+import csv
+import gzip
+import io
+import json
+import math
+import multiprocessing
+import subprocess
+import sys
+from dataclasses import replace
+from pathlib import Path
+
+import numpy as np
+from scipy import optimize
+
+ROOT = Path(__file__).resolve().parents[1]
+sys.path.insert(0, str(ROOT / "src"))
+
+from robot.found import BASE_RADIUS_M, CUES, FIND_RADIUS_M, default_model_path  # noqa: E402
+
+OUT = ROOT / "experiments" / "found_model"
+DATA = OUT / "assessments.csv.gz"
+NAMES = [c.name for c in CUES]
+L2 = 0.1          # ridge on the weights (not the bias): keeps rare indicators (contact, near_found) finite
+P_FIND = 0.8      # the threshold the confirm probability is measured at (RescueConfig.p_find's default)
+
+
+# ----------------------------------------------------------------------------- collecting
+def _label_run(index: int, p_find: float | None = None) -> tuple[list[dict], dict]:
+    """Run train scenario ``index``; its assessments with labels, and the run's find summary."""
+    from robot.rescue import RescueConfig
+    from ssl_sim.runner import RescueRun
+    from ssl_sim.suite import generate
+
+    sc = generate("train", index)
+    if p_find is not None:
+        sc = replace(sc, behaviour=replace(sc.behaviour, p_find=p_find))
+    run = RescueRun(sc)
+    result = run.run()
+    victims = np.array([s.position[:2] for s in run.sources[: run.n_victims]], float)
+    found_at = {k: float(e["time_s"]) for k, e in run.found.items()}
+    rows = []
+    for a in run.behaviour.assessments:
+        _, x, y, _, _ = run._pose_at(a.time)
+        rep = np.asarray(a.position, float)
+        ok = [k for k, v in enumerate(victims) if found_at.get(k, math.inf) >= a.time
+              and np.hypot(*(rep - v)) <= FIND_RADIUS_M and np.hypot(x - v[0], y - v[1]) <= BASE_RADIUS_M]
+        rows.append({"scenario": index, "time": round(a.time, 3), "source": a.source_id,
+                     **{k: round(float(a.features.get(k, 0.0)), 6) for k in NAMES}, "label": int(bool(ok))})
+    times = [e["time_s"] for e in run.found.values()]
+    summary = {"scenario": index, "victims": run.n_victims, "found": len(run.found),
+               "false_finds": sum(1 for d in run.declarations if d["kind"] == "false"),
+               "find_times": times, "time_limit_s": sc.time_limit_s, "spl": result.get("spl")}
+    return rows, summary
+
+
+def _pool(fn, args, workers: int):
+    ctx = multiprocessing.get_context("spawn")
+    with cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as ex:
+        return list(ex.map(fn, *zip(*args)))
+
+
+def collect(first: int, count: int, workers: int) -> None:
+    out = _pool(_label_run, [(i,) for i in range(first, first + count)], workers)
+    rows = [r for rs, _ in out for r in rs]
+    OUT.mkdir(parents=True, exist_ok=True)
+    buf = io.StringIO()
+    w = csv.DictWriter(buf, fieldnames=["scenario", "time", "source", *NAMES, "label"], lineterminator="\n")
+    w.writeheader()
+    w.writerows(rows)
+    with gzip.GzipFile(DATA, "wb", mtime=0) as f:   # mtime 0: the same rows give the same file
+        f.write(buf.getvalue().encode())
+    found = sum(s["found"] for _, s in out)
+    print(f"collected {len(rows)} assessments ({sum(r['label'] for r in rows)} positive) from {count} train "
+          f"scenarios {first}..{first + count - 1}; the collecting model found {found} of "
+          f"{sum(s['victims'] for _, s in out)} victims -> {DATA.relative_to(ROOT)}")
+
+
+# ----------------------------------------------------------------------------- fitting
+def load_data(path: Path = DATA) -> tuple[np.ndarray, np.ndarray, list[dict]]:
+    with gzip.open(path, "rt") as f:
+        rows = list(csv.DictReader(f))
+    X = np.array([[float(r[k]) for k in NAMES] for r in rows], float)
+    y = np.array([int(r["label"]) for r in rows], float)
+    return X, y, rows
+
+
+def fit_logistic(X: np.ndarray, y: np.ndarray, l2: float = L2) -> tuple[float, np.ndarray]:
+    """(bias, weights) minimising the mean log-loss + ``l2`` / 2 |w|^2 / n... (L-BFGS from zero: deterministic)."""
+    n = len(y)
+
+    def loss(theta):
+        z = theta[0] + X @ theta[1:]
+        # log(1 + e^z) - y z, stably
+        ll = np.logaddexp(0.0, z) - y * z
+        p = 0.5 * (1.0 + np.tanh(0.5 * z))
+        g = np.concatenate([[np.sum(p - y)], X.T @ (p - y)]) / n
+        g[1:] += l2 * theta[1:] / n
+        return float(np.mean(ll) + 0.5 * l2 * np.sum(theta[1:] ** 2) / n), g
+
+    res = optimize.minimize(loss, np.zeros(X.shape[1] + 1), jac=True, method="L-BFGS-B",
+                            options={"maxiter": 5000, "gtol": 1e-10, "ftol": 1e-14})
+    return float(res.x[0]), res.x[1:]
+
+
+def victims_per_m2(count: int = 64) -> float:
+    """Mean victims per m^2 of room floor over the first ``count`` train scenarios (generated, not run)."""
+    from ssl_sim.suite import generate
+    dens = []
+    for i in range(count):
+        sc = generate("train", i)
+        size = sc.scene.world.room.size
+        dens.append(len(sc.victims) / (size[0] * size[1]))
+    return float(np.mean(dens))
+
+
+def _git_commit() -> str:
+    try:
+        return subprocess.run(["git", "rev-parse", "--short", "HEAD"], cwd=ROOT, capture_output=True, text=True,
+                              check=True).stdout.strip()
+    except (OSError, subprocess.CalledProcessError):
+        return "unknown"
+
+
+def fit(write: bool = True, path: Path = DATA) -> dict:
+    X, y, rows = load_data(path)
+    bias, w = fit_logistic(X, y)
+    p = 1.0 / (1.0 + np.exp(-(bias + X @ w)))
+    # confirm probability: listens at her estimate (the robot within the find radius of the report) while she is
+    # there, that reach P_FIND
+    at = X[:, NAMES.index("distance")] <= FIND_RADIUS_M
+    pos_at = (y == 1) & at
+    confirm = float(np.mean(p[pos_at] >= P_FIND)) if pos_at.any() else 0.3
+    confirm = min(max(confirm, 0.05), 0.95)
+    scen = sorted({int(r["scenario"]) for r in rows})
+    model = {
+        "bias": round(bias, 6),
+        "weights": {k: round(float(v), 6) for k, v in zip(NAMES, w)},
+        "provenance": {
+            "fitted_by": "tools/fit_found_model.py fit (L2-regularised logistic regression, scipy L-BFGS-B)",
+            "data": str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else str(path),
+            "train_scenarios": f"{scen[0]}..{scen[-1]}" if scen else "",
+            "assessments": int(len(y)), "positives": int(y.sum()), "l2": L2,
+            "confirm_probability": round(confirm, 4), "confirm_measured_at_p_find": P_FIND,
+            "confirm_listens": int(pos_at.sum()),
+            "victims_per_m2": round(victims_per_m2(), 5),
+        },
+    }
+    if write:
+        default_model_path().write_text(json.dumps(model, indent=2) + "\n")
+        _figures(X, y, p, model)
+        print(f"wrote {default_model_path().relative_to(ROOT)}")
+    print(json.dumps(model, indent=2))
+    return model
+
+
+def _figures(X, y, p, model) -> None:
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+
+    OUT.mkdir(parents=True, exist_ok=True)
+    fig, (a, b) = plt.subplots(1, 2, figsize=(11, 4))
+    edges = np.linspace(0, 1, 11)
+    k = np.clip(np.digitize(p, edges) - 1, 0, 9)
+    mids, obs, ns = [], [], []
+    for i in range(10):
+        m = k == i
+        if m.sum() >= 5:
+            mids.append(p[m].mean()), obs.append(y[m].mean()), ns.append(int(m.sum()))
+    a.plot([0, 1], [0, 1], "k:", lw=1)
+    a.plot(mids, obs, "o-")
+    for xm, yo, n in zip(mids, obs, ns):
+        a.annotate(str(n), (xm, yo), textcoords="offset points", xytext=(4, -10), fontsize=7)
+    a.set(xlabel="P(find) predicted", ylabel="share of finds (truth)", title="calibration on the fit data")
+    ws = model["weights"]
+    b.barh(list(ws), list(ws.values()))
+    b.set(xlabel="log-odds per unit of the cue", title=f"weights (bias {model['bias']:.2f})")
+    fig.tight_layout()
+    fig.savefig(OUT / "fit.png", dpi=110)
+    plt.close(fig)
+
+
+# ----------------------------------------------------------------------------- trade-off curve
+def curve(first: int, count: int, values: list[float], workers: int) -> None:
+    tasks = [(i, pf) for pf in values for i in range(first, first + count)]
+    out = _pool(_label_run, tasks, workers)
+    rows = []
+    for pf in values:
+        ss = [s for (i, q), (_, s) in zip(tasks, out) if q == pf]
+        times = [t for s in ss for t in s["find_times"]]
+        rows.append({"p_find": pf, "runs": len(ss), "found": sum(s["found"] for s in ss) / sum(s["victims"] for s in ss),
+                     "false_finds_per_run": sum(s["false_finds"] for s in ss) / len(ss),
+                     "mean_time_to_find_s": float(np.mean(times)) if times else None})
+        print(json.dumps(rows[-1]))
+    OUT.mkdir(parents=True, exist_ok=True)
+    (OUT / "p_find_curve.json").write_text(json.dumps({"train_scenarios": f"{first}..{first + count - 1}",
+                                                       "commit": _git_commit(), "rows": rows}, indent=2) + "\n")
+    import matplotlib
+    matplotlib.use("Agg")
+    import matplotlib.pyplot as plt
+    fig, ax = plt.subplots(figsize=(5.5, 4))
+    t = [r["mean_time_to_find_s"] or np.nan for r in rows]
+    ax.plot(t, [r["false_finds_per_run"] for r in rows], "o-")
+    for r, ti in zip(rows, t):
+        ax.annotate(f"p_find {r['p_find']:g}\nfound {r['found']:.0%}", (ti, r["false_finds_per_run"]),
+                    fontsize=7, textcoords="offset points", xytext=(4, 2))
+    ax.set(xlabel="mean time to find (s)", ylabel="false finds per run",
+           title=f"p_find trade-off, train {first}..{first + count - 1}")
+    fig.tight_layout()
+    fig.savefig(OUT / "p_find_curve.png", dpi=110)
+    plt.close(fig)
+
+
+def main(argv=None) -> None:
+    ap = argparse.ArgumentParser(description=__doc__.split("\n\n")[0])
+    sub = ap.add_subparsers(dest="cmd", required=True)
+    c = sub.add_parser("collect")
+    c.add_argument("--first", type=int, default=0)
+    c.add_argument("--count", type=int, default=48)
+    c.add_argument("--workers", type=int, default=2)
+    f = sub.add_parser("fit")
+    f.add_argument("--dry-run", action="store_true", help="print the fit, write nothing")
+    k = sub.add_parser("curve")
+    k.add_argument("--first", type=int, default=200)
+    k.add_argument("--count", type=int, default=24)
+    k.add_argument("--p", type=float, nargs="+", default=[0.5, 0.7, 0.8, 0.9, 0.95])
+    k.add_argument("--workers", type=int, default=2)
+    a = ap.parse_args(argv)
+    if a.cmd == "collect":
+        collect(a.first, a.count, a.workers)
+    elif a.cmd == "fit":
+        fit(write=not a.dry_run)
+    else:
+        curve(a.first, a.count, a.p, a.workers)
+
+
+if __name__ == "__main__":
+    main()
