@@ -1,24 +1,36 @@
-"""One listen standing still: fresh audio, localized sources, and voice evidence toward each of them.
+"""One listen standing still: fresh audio, localized sources, tracked across listens, and voice evidence.
 
-This is the hearing stage of the rescue data path (hearing -> sound map -> planner -> behaviour -> motion)
-fed by per-window detections: each detection of the listen becomes one ``ListenEvidence`` (array frame,
-``track_id`` None) whose ``voice_probability`` comes from the speech the Silero VAD hears in the beam toward
-it (``robot.hearing.speech_fractions``: the MPDR + noise suppression chain of ``robot.hearing``, each speech
-frame credited to the beam that owns it). The sound map accumulates these per source over listens, which is what a
-tracker + ``robot.hearing.Hearing`` would do per track; a tracker can replace the per-window detections
-without changing the map's interface (``robot.sound_map.BearingEvidence``).
+This is the hearing stage of the rescue data path (hearing -> sound map -> planner -> behaviour -> motion), one
+chain per listen: localizer (``locate`` over the block: array frame) -> streaming tracker
+(``ssl_core.tracking.Tracker``, one update per listen) -> voice evidence per detection and per track ->
+``ListenEvidence`` for the sound map (``robot.sound_map.BearingEvidence``).
+
+Tracking across listens. Each listen's detections are one tracker update at the block's end time. Given the
+robot's pose at each listen (``listen(..., pose=(x, y, yaw))``, world/odometry frame), the tracker is told the
+motion since the previous listen: the yaw change as a rotation of the array frame and the array centre's
+displacement (the array sits on the robot's vertical axis, ``robot.mount``) in the current array frame, each
+track's source re-aimed from the new centre at its assumed range (``source_range_m``). A source keeps its track
+id while the robot turns and drives between listens, and the sound map prefers the source that id fed
+(``SoundMap._associate``). A listen without a pose leaves the motion unknown: the tracker starts over, and ids
+hold within that listen only. Every detection becomes evidence; ``track_id`` is the id of the track it updated or
+started (None only if the tracker calls it neither, or its track is still tentative under a config that
+confirms late). ``LISTEN_TRACKER`` is the default tracker configuration (why each value: there).
 
 Per-listen voice probability: ``VOICE_P`` when the beam's speech-frame fraction reaches ``voice_threshold``,
-else ``NON_VOICE_P``. Asymmetric, as in ``robot.hearing``: speech frames are rare but decisive (the VAD
-calls no 1 s chunk of the data set's non-speech test part speech; the pump of dense_pump gave 0 speech frames
+else ``NON_VOICE_P``, from the speech the Silero VAD hears in the beam toward the detection
+(``robot.hearing.speech_fractions``: the MPDR + noise suppression chain of ``robot.hearing``, each speech frame
+credited to the beam that owns it). Asymmetric, as in ``robot.hearing``: speech frames are rare but decisive (the
+VAD calls no 1 s chunk of the data set's non-speech test part speech; the pump of dense_pump gave 0 speech frames
 in 29 of 29 listens), while a listen without speech is weak evidence (a caller pauses; and with the
 delay-and-sum beam used before, callers 2-4 m away in the light rubble gave speech frames in 0-12 % of their
 listens, with this chain a talking caller's beam in 84 %: docs/design/behaviour.md, "The sound map").
+Per-track voice probability (``track_voice_probability``, ``Listener.track_voice``): the same per-listen
+log-odds summed over the listens of one track id (prior 0.5), clipped to +-``MAX_TRACK_LOG_ODDS``.
 """
 from __future__ import annotations
 
 import math
-from dataclasses import dataclass, field
+from dataclasses import dataclass, field, replace
 from typing import Any, Protocol, Sequence
 
 import numpy as np
@@ -28,11 +40,48 @@ from robot.hearing import VAD_RATE, speech_fractions, voice_scan
 from robot.vad import SileroVad, check_model
 from ssl_core.beamform import beam_signal
 from ssl_core.grid import direction_from_angles
+from ssl_core.tracking import Tracker, TrackerConfig
 
-__all__ = ["ListenEvidence", "Listen", "Listener", "VOICE_P", "NON_VOICE_P"]
+__all__ = ["ListenEvidence", "Listen", "Listener", "TrackVoice", "LISTEN_TRACKER", "VOICE_P", "NON_VOICE_P",
+           "MAX_TRACK_LOG_ODDS"]
 
 VOICE_P = 0.9          # a listen whose beam is speech (log-odds +2.2)
 NON_VOICE_P = 0.42     # a listen whose beam is not (log-odds -0.32: seven of them undo one with speech)
+# Cap of a track's summed voice log-odds, the sound map's (SoundMapConfig.max_log_odds): three listens with speech
+# (+6.6) or 19 without (-6.1) reach it, and either class can still be overturned by a few listens.
+MAX_TRACK_LOG_ODDS = 6.0
+
+# The tracker between listens: one update per 1 s listen, listens 3-7 s apart (a 2-6 s drive between them).
+# Fields left at TrackerConfig's defaults (measurement_sigma, power model, p_track/p_new/p_false, activity filter,
+# history) are per-detection models that hold for a listen's pooled detections too (a pooled mode is no less
+# accurate than one window's peak); the activity filter is not read here.
+LISTEN_TRACKER = TrackerConfig(
+    # Sources in a rescue stand still (a trapped caller, a machine); the robot's own motion is removed by the
+    # rotation/translation given per listen. What is left between listens is the odometry's yaw error and the
+    # parallax error of the assumed range (a 0.5 m step across a source at 1 m instead of the assumed 2 m: up to
+    # 14 deg; at 4 m 7 deg). 0.5 deg/s^2 with a 1 s velocity memory lets a track born at 3 deg coast to a
+    # direction sigma of 3.3 / 5.1 / 9.5 deg after 2 / 4 / 6 s (the detection's 1.7-7.5 deg added in the gate):
+    # the tracker's gate (~3 sigma for strong detections) takes these errors and stays well inside the 90 deg
+    # between two sources a turn swaps (tests/test_hearing_stage.py). The tracker's default (10 deg/s^2, 3 s: a
+    # walking talker over 128 ms windows) coasts to 80 deg after 4 s, a gate that takes any detection.
+    acceleration_sigma_deg=0.5,
+    speed_memory_s=1.0,        # a velocity fitted to bearings seconds apart is odometry and parallax error
+    initial_speed_sigma_deg=1.0,
+    # Every detection not explained by a track starts one: a listen's detection is already a mode of the
+    # block's windows seen in at least two of them (Localizer.locate: the false-alarm control), and the map
+    # needs an id on every bearing to tie the next listen's bearing to it. The tracker's default (0.9) starts
+    # none below power 0.064, above the median power of a talker at SNR 5 dB (0.058, TrackerConfig).
+    theta_new=0.0,
+    # Confirmed at its first detection for the same reason: with 3 of 8 windows a track would only get an id at
+    # its third listen (10-20 s), and the first listens' evidence none. The sound map accumulates its own
+    # evidence per source (listens, inliers, voice), which is what decides what to approach.
+    confirm_hits=1,
+    confirm_windows=1,
+    # Deleted after 15 s without a detection: a source missed in one or two listens (a caller's pause, a
+    # drive of up to 6 s) keeps its id; longer, its coasted direction (sigma ~56 deg at 15 s) no longer means
+    # much, and a new id costs only the map's looser gate.
+    silence_s=15.0,
+)
 
 
 class Detection(Protocol):
@@ -57,6 +106,12 @@ class ListenEvidence:
                                    # sound arrives as one plane wave (a mouth within the critical distance: high)
     speech_fraction: float = 0.0   # VAD frames called speech in the beam (0..1)
     voice_scan: bool = False       # added by the voice scan (``Listener``), not a peak of the SRP-PHAT search
+    track_voice_probability: float | None = None   # P(voice) of its track over its listens so far (this one
+    #                                                included); None given: this listen's voice_probability
+
+    def __post_init__(self) -> None:
+        if self.track_voice_probability is None:
+            object.__setattr__(self, "track_voice_probability", float(self.voice_probability))
 
     @property
     def azimuth(self) -> float:
@@ -75,6 +130,33 @@ class Listen:
     ignored: list[str] = field(default_factory=list)
 
 
+class TrackVoice:
+    """Voice log-odds per track id, summed over listens (prior 0.5, clipped to +-``max_log_odds``)."""
+
+    def __init__(self, max_log_odds: float = MAX_TRACK_LOG_ODDS) -> None:
+        if not (math.isfinite(max_log_odds) and max_log_odds > 0):
+            raise ValueError(f"max_log_odds={max_log_odds!r}: expected a finite number > 0")
+        self.max_log_odds = float(max_log_odds)
+        self._log_odds: dict[int, float] = {}
+
+    def add(self, track_id: int, voice_probability: float) -> float:
+        """Fold in one listen's ``voice_probability`` (0..1) for ``track_id``; returns the track's probability."""
+        p = min(max(float(voice_probability), 1e-6), 1 - 1e-6)
+        lo = self._log_odds.get(int(track_id), 0.0) + math.log(p / (1 - p))
+        self._log_odds[int(track_id)] = min(max(lo, -self.max_log_odds), self.max_log_odds)
+        return self.probability(track_id)
+
+    def probability(self, track_id: int) -> float:
+        if int(track_id) not in self._log_odds:
+            raise KeyError(f"track_id={track_id}: no voice evidence for this track (none heard, or deleted)")
+        return 1.0 / (1.0 + math.exp(-self._log_odds[int(track_id)]))
+
+    def keep(self, track_ids) -> None:
+        """Forget the tracks not in ``track_ids`` (the tracker deleted them; ids are never reused)."""
+        live = {int(t) for t in track_ids}
+        self._log_odds = {k: v for k, v in self._log_odds.items() if k in live}
+
+
 class Listener:
     """``listen(seconds, settle_s, min_power)`` -> ``Listen``. ``mic_positions`` (n, 3) m, array frame (None:
     no beam, no voice evidence). ``speech`` replaces the VAD: ``speech(samples, detection, direction)`` -> the
@@ -90,19 +172,43 @@ class Listener:
     detection pointed at her in 31 of 70 listens instead of 15.
 
     ``drive``: the ``DriveBase`` whose wheel speeds (read around the block) go to the localizer when it suppresses
-    the drive's noise (``Localizer.ego_noise``); standing still (speeds below its ``min_speed``) nothing changes."""
+    the drive's noise (``Localizer.ego_noise``); standing still (speeds below its ``min_speed``) nothing changes.
+
+    ``tracker``: the ``TrackerConfig`` of the tracker across listens (None: ``LISTEN_TRACKER``);
+    ``source_range_m``: the range (m) a new track's source is assumed at when the robot's translation re-aims it
+    (the tracker's ``source_range``). ``track_voice(track_id)``: the track's voice probability over its listens."""
 
     def __init__(self, audio: AudioSource, clock: Clock, localizer: Any, mic_positions: np.ndarray | None,
-                 voice_threshold: float = 0.2, speech=None, voice_scan_deg: float = 0.0, drive=None) -> None:
+                 voice_threshold: float = 0.2, speech=None, voice_scan_deg: float = 0.0, drive=None,
+                 tracker: TrackerConfig | None = None, source_range_m: float = 2.0) -> None:
         self.audio, self.clock, self.localizer = audio, clock, localizer
         self.drive = drive
         self.mic_positions = mic_positions
         self.voice_threshold = voice_threshold
         self.speech = speech
         self.voice_scan_deg = voice_scan_deg
+        if tracker is not None and not isinstance(tracker, TrackerConfig):
+            raise ValueError(f"tracker: expected a ssl_core.tracking.TrackerConfig or None, got {tracker!r}")
+        if not (isinstance(source_range_m, (int, float)) and math.isfinite(source_range_m) and source_range_m > 0):
+            raise ValueError(f"source_range_m={source_range_m!r}: expected a finite range > 0 m")
+        self.tracker = Tracker(LISTEN_TRACKER if tracker is None else tracker)
+        self.source_range_m = float(source_range_m)
+        self.voice = TrackVoice()
+        self._last_pose: tuple[float, float, float] | None = None
         self._vad: SileroVad | None = None   # on first use (``check_model``: shared, checked)
 
-    def listen(self, seconds: float, settle_s: float, min_power: float) -> Listen:
+    def track_voice(self, track_id: int) -> float:
+        """P(voice) of a live track over all its listens (KeyError for an id never heard or deleted)."""
+        return self.voice.probability(track_id)
+
+    def listen(self, seconds: float, settle_s: float, min_power: float, *,
+               pose: tuple[float, float, float] | None = None) -> Listen:
+        """Listen ``seconds`` s after ``settle_s`` s; detections below ``min_power`` are ignored. ``pose``: the
+        robot's (x m, y m, yaw rad) in the world/odometry frame while the block is captured (standing still):
+        with the previous listen's pose it gives the tracker the motion between them. None: the motion is
+        unknown and the tracker starts over, so track ids then hold within one listen only (a robot that
+        stands still passes its constant pose)."""
+        motion = self._motion(pose)
         self.clock.sleep(settle_s)
         self.audio.flush()
         n = max(1, int(round(seconds * self.audio.sample_rate)))
@@ -129,7 +235,55 @@ class Listener:
                 # kept only if its beam owns the voice it was added for (else a detection beside it does)
                 if len(scanned[0]) > len(heard[0]) and scanned[0][-1].speech_fraction >= self.voice_threshold:
                     heard = scanned
-        return Listen(block, *heard)
+        evidence, n_detections, ignored = heard
+        return Listen(block, self._tracked(evidence, motion), n_detections, ignored)
+
+    def _motion(self, pose) -> tuple[np.ndarray | None, np.ndarray | None]:
+        """(rotation, translation) of the array frame since the previous listen, for ``Tracker.update``: the
+        rotation maps the previous array frame's vectors into this one (``Rz(-dyaw)``), the translation is the
+        array centre's displacement in this array frame (the array is level, on the robot's vertical axis).
+        (None, None) for the first listen with a pose. Without a pose the motion since the last listen is
+        unknown (the robot may have turned): the tracker starts over (ids keep counting up, so the sound map
+        ties no new bearing to an old source by its id) rather than carry ids onto whatever now lies where a
+        source was."""
+        if pose is None:
+            self.tracker.reset()
+            self.voice.keep(())
+            self._last_pose = None
+            return None, None
+        try:
+            x, y, yaw = (float(v) for v in pose)
+        except (TypeError, ValueError):
+            raise ValueError(f"pose: expected (x m, y m, yaw rad), got {pose!r}") from None
+        if not all(map(math.isfinite, (x, y, yaw))):
+            raise ValueError(f"pose: expected finite (x m, y m, yaw rad), got {pose!r}")
+        last, self._last_pose = self._last_pose, (x, y, yaw)
+        if last is None:
+            return None, None
+        c, s = math.cos(yaw - last[2]), math.sin(yaw - last[2])
+        rotation = np.array([[c, s, 0.0], [-s, c, 0.0], [0.0, 0.0, 1.0]])          # Rz(-dyaw)
+        dx, dy = x - last[0], y - last[1]
+        cy, sy = math.cos(yaw), math.sin(yaw)
+        translation = np.array([cy * dx + sy * dy, -sy * dx + cy * dy, 0.0])     # Rz(-yaw) (dx, dy, 0)
+        return rotation, translation
+
+    def _tracked(self, evidence: list[ListenEvidence], motion) -> list[ListenEvidence]:
+        """The listen's evidence as one tracker update (every listen, also one without detections: tracks coast),
+        each piece with its track's id and that track's accumulated voice probability."""
+        rotation, translation = motion
+        time = evidence[0].time if evidence else float(self.clock.now())
+        self.tracker.update(evidence, time, rotation=rotation, translation=translation,
+                            source_range=self.source_range_m)
+        ids = self.tracker.detection_ids()
+        self.voice.keep(t.id for t in self.tracker.tracks())
+        out = []
+        for ev, tid in zip(evidence, ids):
+            if tid is None:
+                out.append(ev)
+                continue
+            out.append(replace(ev, track_id=int(tid),
+                               track_voice_probability=self.voice.add(tid, ev.voice_probability)))
+        return out
 
     def _wheel_speeds(self) -> np.ndarray | None:
         """The wheels' speeds (3,) rad/s from ``drive``, only when the localizer suppresses the drive's noise

@@ -20,8 +20,9 @@ apart give < 0.3 m):
 * covariance: the inverse of the Gauss-Newton normal matrix at the bearing noise ``bearing_sigma_deg``;
 * association of a new ray: Mahalanobis gate on the (azimuth, elevation) innovation with
   ``S = H P H^T + R`` (chi-square, 2 degrees of freedom) -- a source known only along one ray accepts a
-  ray from a new pose anywhere along that first ray. The track id is a hint: a track that fed a source
-  keeps feeding it while its rays stay within the gate. Two rays of one update never join one source.
+  ray from a new pose anywhere along that first ray. The track id is a second association: a track that fed a
+  source keeps feeding it while its rays stay within ``TRACK_GATE_FACTOR`` (2) times the gate's chi-square.
+  Two rays of one update never join one source.
 
 Class: each inlier listen is independent evidence: the victim probability is the sigmoid of the sum of
 the listens' voice log-odds (prior 0.5), clipped to +-``max_log_odds`` so either class can be overturned.
@@ -242,6 +243,7 @@ class _Source:
 # ----------------------------------------------------------------------------- geometry
 LEVEL_RAY_RANGE_M = 3.0   # range guessed for a bearing that does not point down to the height prior
 DISTINCT_POSES_M = 0.15   # two listens at least this far apart (horizontally) are from different poses
+TRACK_GATE_FACTOR = 2.0   # a ray's chi-square may reach this times gate_chi2 at the source its track id fed
 NEAR_CROSSING_M = 0.5     # a source heard along one ray takes a new ray only where it crosses that ray this far
 #                           (horizontally) from the new ray's origin or farther (see ``SoundMap._along_ray``)
 
@@ -613,6 +615,7 @@ class SoundMap:
 
     def _associate(self, ev: BearingEvidence, origin: np.ndarray, d: np.ndarray, taken: set[int]) -> int | None:
         cfg = self.config
+        tracked = self._resolve(self._track_to_source.get(int(ev.track_id), -1)) if ev.track_id is not None else None
         scores = []
         for s in self._sources:
             if s.id in taken:
@@ -625,13 +628,18 @@ class SoundMap:
                 continue
             m = self._mahalanobis(s, origin, d) if not s.rays or _crossing_deg(s.rays) >= cfg.min_pair_angle_deg \
                 else self._along_ray(s, origin, d)   # (no rays: placed by add_found, a point with its covariance)
+            if s.id == tracked and m <= TRACK_GATE_FACTOR * cfg.gate_chi2:
+                # The tracker already tied this bearing to the track that fed this source, in the array frame
+                # with the robot's motion removed: a second, independent association. The map's gate alone is
+                # tight where its covariance is optimistic (a few rays at the nominal bearing sigma, a range from
+                # the height prior). Twice the chi-square is the gate of a bearing noise sqrt(2) larger; a true
+                # ray falls outside it with probability exp(-gate_chi2) (1e-6 at 13.8), and a track the tracker
+                # carried onto another source far off still fails it.
+                return s.id
             if m <= cfg.gate_chi2:
                 scores.append((m, s.id))
         if not scores:
             return None
-        ids = [sid for _, sid in scores]
-        if ev.track_id is not None and self._resolve(self._track_to_source.get(int(ev.track_id), -1)) in ids:
-            return self._resolve(self._track_to_source[int(ev.track_id)])
         return min(scores)[1]
 
     def _refit(self, src: _Source) -> None:

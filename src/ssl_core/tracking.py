@@ -372,6 +372,7 @@ class Tracker:
         self._time: float | None = None
         self._history: dict[int, list[tuple[float, float, float]]] = {}
         self._next_key = 0
+        self._det_keys = np.zeros(0, int)
 
     def update(self, detections: Sequence[Detection], time: float,
                rotation: np.ndarray | None = None, translation: np.ndarray | None = None,
@@ -398,12 +399,24 @@ class Tracker:
         if t is not None:
             self._translate(t)
         pairs, w, new, innovations = self._associate(z, sigma_r, power)
+        # which track (internal key) each detection updated or started: read back by ``detection_ids``
+        det_keys = np.full(len(z), -1)
+        det_keys[pairs[:, 1]] = self._tracks.key[pairs[:, 0]]
+        det_keys[np.flatnonzero(new)] = self._next_key + np.arange(int(np.count_nonzero(new)))
         self._correct(pairs, w, innovations, power, level, time)
         self._update_activity(pairs, w, dt)
         self._delete(time)
         self._initiate(z[new], sigma_r[new], power[new], level[new], time, float(source_range))
         self._confirm()
+        self._det_keys = det_keys
         return self.tracks()
+
+    def detection_ids(self) -> list[int | None]:
+        """Per detection of the last ``update`` (in its order): the id of the confirmed track it updated or
+        started, or None (a false detection, or a track still tentative or dropped in that update)."""
+        tr = self._tracks
+        ids = dict(zip(tr.key.tolist(), tr.id.tolist()))
+        return [ids.get(int(k)) or None for k in self._det_keys]
 
     def tracks(self) -> list[Track]:
         """The confirmed tracks after the last update, by id."""
