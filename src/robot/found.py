@@ -21,6 +21,8 @@ Why these cues, physically:
 * ``position``: log-odds of the map's Gaussian mass inside the find radius around its estimate (from the
   triangulation's covariance): a tight estimate is where she is, a loose one may be metres off;
 * ``distance``: how far the robot's base is from the estimate: the find needs the base near her;
+* ``beyond_reach``: how far the base is beyond 1 m of the estimate (the find's base radius less its report
+  radius): a hinge, as the log-odds of a find fall steeply there;
 * ``depression``: the sine of how steeply the bearing heard now points down. The array is ~0.3 m up and a mouth
   ~0.2 m; a mouth within reach is heard steeply, one across the room near the horizon;
 * ``range_agreement``: the range at which the bearing heard now meets the mouth height, against the map's distance:
@@ -139,6 +141,17 @@ class Distance:
 
 
 @dataclass(frozen=True)
+class BeyondReach:
+    """How far (m) the base is beyond 1 m of the estimate: a find needs the base within 1.5 m of her, and the
+    estimate is 0.1-0.5 m off her, so the log-odds fall steeply there (a hinge beside the linear ``distance``)."""
+
+    name: str = "beyond_reach"
+
+    def feature(self, ctx: FoundContext) -> float:
+        return float(np.clip(ctx.distance_m - (BASE_RADIUS_M - FIND_RADIUS_M), 0.0, 2.0))
+
+
+@dataclass(frozen=True)
 class Depression:
     name: str = "depression"
 
@@ -252,7 +265,7 @@ def is_echo(ev, spot: Sequence) -> bool:
 
 
 #: Every cue, in the order of the model's weights.
-CUES: tuple[Cue, ...] = (Voice(), Position(), Distance(), Depression(), RangeAgreement(), LevelRise(), Coherence(),
+CUES: tuple[Cue, ...] = (Voice(), Position(), Distance(), BeyondReach(), Depression(), RangeAgreement(), LevelRise(), Coherence(),
                          HeardNow(), Echo(), NearMachine(), NearFound(), Contact(), Triangulated())
 
 #: The find criterion reported for the cue that added most to a find's log-odds.

@@ -71,3 +71,29 @@ def ray_ends(layout: RangeLayout, pose, ranges) -> tuple[np.ndarray, np.ndarray,
     hit = np.isfinite(r) & (r <= layout.max_range_m)
     ends = starts + np.where(hit, r, layout.max_range_m)[:, None] * u
     return starts, ends, hit
+
+
+#: Readings go into the grid once per 5 cm of travel or 10 deg of turn: readings from one spot repeat one error
+#: (a tilted ray on the same floor), and control ticks are 1.25 cm apart.
+SCAN_SPACING_M = 0.05
+SCAN_TURN = math.radians(10.0)
+
+
+class RangeScans:
+    """Feeds range readings into an occupancy grid (anything with ``mark_rays(starts, ends, hit)``), thinned to
+    one per ``SCAN_SPACING_M`` of travel or ``SCAN_TURN`` of turn. Call it with each (pose, status) of a move;
+    ``force=True`` takes a reading whatever the spacing (the one that stopped a move)."""
+
+    def __init__(self, grid, layout: RangeLayout) -> None:
+        self.grid, self.layout = grid, layout
+        self._last: np.ndarray | None = None
+
+    def __call__(self, pose, status, force: bool = False) -> None:
+        if status.ranges is None:
+            return
+        last = self._last
+        if not force and last is not None and math.hypot(pose[0] - last[0], pose[1] - last[1]) < SCAN_SPACING_M \
+                and abs(math.remainder(pose[2] - last[2], 2 * math.pi)) < SCAN_TURN:
+            return
+        self._last = np.array(pose[:3], float)
+        self.grid.mark_rays(*ray_ends(self.layout, pose, status.ranges))

@@ -41,17 +41,12 @@ from robot.odometry import GyroFusionConfig, Odometry, TravelConfig, wrap_angle
 from robot.options import Option, OptionKind, OptionsConfig, Timing, choose
 from robot.planner import Plan, Planner, PlannerConfig
 from robot.pursuit import PursuitConfig, Pursuits
-from robot.ranging import RangeLayout, ray_ends
+from robot.ranging import RangeLayout, RangeScans
 from robot.recovery import Recovery, RecoveryConfig
 from robot.rescue_config import FoundVictim, RescueConfig
 from robot.sound_map import DISTINCT_POSES_M, MapSource, SoundMap, SoundMapConfig, SourceClass, SourceState
 
 log = logging.getLogger(__name__)
-
-#: Range readings go into the grid once per 5 cm of travel or 10 deg of turn (readings from one spot repeat one
-#: error: a tilted ray on the same floor).
-SCAN_SPACING_M = 0.05
-SCAN_TURN = math.radians(10.0)
 
 class RescueBehaviour:
     """The behaviour on any HAL backend; call ``step()`` repeatedly or ``run(max_time)``.
@@ -85,15 +80,15 @@ class RescueBehaviour:
             raise ValueError(f"localizer fs is {loc_fs} Hz but the audio source delivers {audio.sample_rate} Hz")
         self.found_model = found_model if found_model is not None else FoundModel.load()
         self.odometry = Odometry(params, start_pose, gyro, travel)
-        self.motion = Motion(drive, clock, self.odometry, motion, fatal=self._check_faults, sensed=self._sensed,
+        self.grid = OccupancyGrid(occupancy, origin=np.asarray(start_pose, float)[:2])
+        self._scans = RangeScans(self.grid, range_layout)
+        self.motion = Motion(drive, clock, self.odometry, motion, fatal=self._check_faults, sensed=self._scans,
                              range_layout=range_layout)
-        self.range_layout = range_layout
         self.listener = Listener(audio, clock, localizer, mics, config.voice_threshold, speech, config.voice_scan_deg,
                                  drive=drive)
         if speech is None and mics is not None:
             _ = self.listener.vad   # the model files checked now (robot.vad.ModelError), not at the first listen
         self.map = SoundMap(sound_map, mount)
-        self.grid = OccupancyGrid(occupancy, origin=np.asarray(start_pose, float)[:2])
         self.coverage = ListeningCoverage(self.grid.origin, self.grid.n, self.grid.resolution, coverage,
                                           memory_budget_mb=self.grid.coverage_store_mb)
         self.planner = Planner(planner)
@@ -115,7 +110,6 @@ class RescueBehaviour:
         self.plan: Plan | None = None
         self._spot: list[ListenEvidence] = []     # every bearing heard from the current spot (robot frame) ...
         self._spot_at: np.ndarray | None = None   # ... and that spot's pose
-        self._scan_pose: np.ndarray | None = None   # where the last range reading went into the grid
         self._side = 1.0                          # alternating side of steps across a bearing
         self._faults_seen: tuple[str, ...] = ()
         self._step_events: list[RescueEvent] = []
@@ -219,7 +213,8 @@ class RescueBehaviour:
         """One listen into the map and the coverage: the evidence heard now by unfound source id."""
         cfg = self.config
         self.motion.stand(cfg.settle_s)          # odometry tracks the braking, then learns the gyro bias
-        res = self.listener.listen(cfg.listen_s, 0.0, cfg.min_power)
+        pose = self.pose.copy()                   # standing: the pose the block is captured at
+        res = self.listener.listen(cfg.listen_s, 0.0, cfg.min_power, pose=tuple(pose))
         self.motion.update_odometry(stationary=True)
         pose = self.pose
         assoc = self.map.update(res.evidence, pose, self.clock.now())
@@ -390,8 +385,7 @@ class RescueBehaviour:
                     return
             self.pursuits.contact(target.id, self.clock.now())
         if b.kind is ContactKind.RANGE:
-            self._scan_pose = None
-            self._sensed(self.pose, b.status)     # the reading that stopped the move goes into the grid
+            self._scans(self.pose, b.status, force=True)   # the reading that stopped the move goes into the grid
             seen = [round(r, 2) if math.isfinite(r) else None for r in b.status.ranges or ()]
             self._emit(Decision.OBSTACLE, "range sensors see an obstacle in the way: replan", ObstaclePayload(seen))
             return
@@ -399,17 +393,6 @@ class RescueBehaviour:
         self.recovery.after_contact(b, "while moving")
 
     # -- helpers ----------------------------------------------------------------------
-    def _sensed(self, pose: np.ndarray, status: DriveStatus) -> None:
-        """Range readings into the occupancy grid, one per ``SCAN_SPACING_M`` of travel or ``SCAN_TURN``."""
-        if status.ranges is None:
-            return
-        last = self._scan_pose
-        if last is not None and math.hypot(*(pose[:2] - last[:2])) < SCAN_SPACING_M \
-                and abs(wrap_angle(pose[2] - last[2])) < SCAN_TURN:
-            return
-        self._scan_pose = np.array(pose, float)
-        self.grid.mark_rays(*ray_ends(self.range_layout, pose, status.ranges))
-
     def _machines(self) -> list[np.ndarray]:
         """World (x, y) of the mapped interferers: their sound masks the callers near them."""
         return [s.position[:2] for s in self.map.sources
