@@ -260,6 +260,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--suite", default=None, help="run a generated suite's split (train | test) instead of the "
                     "shipped scenarios (ssl_sim.suite.write_scenarios)")
     ap.add_argument("--count", type=int, default=None, help="with --suite: only its first COUNT scenarios")
+    ap.add_argument("--first", type=int, default=0, help="with --suite train: start at this index (a range apart "
+                    "from the one a model was fitted on)")
     ap.add_argument("--results-name", default="rescue", help="write benchmarks/results/NAME.json (_results.py); '' for none")
     ap.add_argument("--tables-only", action="store_true",
                     help="run nothing: only tabulate the rows of --rows-in (e.g. to re-render an earlier run)")
@@ -293,7 +295,7 @@ def main(argv: list[str] | None = None) -> int:
             except ImportError as exc:
                 raise SystemExit(f"bench_rescue.py: --suite needs ssl_sim.suite.write_scenarios, which this tree does "
                                  f"not provide ({exc})") from None
-            suite_files = [Path(p) for p in write_scenarios(args.suite, tmp / "suite", args.count)]
+            suite_files = [Path(p) for p in write_scenarios(args.suite, tmp / "suite", args.count, args.first)]
             if "--seeds" not in (argv if argv is not None else sys.argv[1:]):
                 seeds = [-1]    # a suite scenario is complete with its seed
         new_paths = _scenario_paths(tmp, old=False, only=only, files=suite_files)

@@ -165,12 +165,13 @@ class RescueBehaviour:
     def _cycle(self) -> None:
         if not self._ready():
             return
-        heard = self._listen()
-        for s, a in self._judge(heard):
-            if a.probability >= self.config.p_find:
-                self._declare(s, a)
-                if self.done:
-                    return
+        judged = self._judge(self._listen())
+        # One find per listen: the others' evidence changes with it (a second source beside a found victim is
+        # mostly her own voice again: the near_found cue), judged again after the next listen.
+        if judged and judged[0][1].probability >= self.config.p_find:
+            self._declare(*judged[0])
+            if self.done:
+                return
         if not self._keep_on_map():
             return
         self._act(choose(self.map.sources, self.pursuits, self.planner, self.grid, self.coverage, self.pose,
@@ -271,8 +272,6 @@ class RescueBehaviour:
         return sorted(out, key=lambda sa: -sa[1].probability)
 
     def _declare(self, s: MapSource, a: Assessment) -> None:
-        if any(math.hypot(s.position[0] - v.position[0], s.position[1] - v.position[1]) < 1e-9 for v in self.victims):
-            return
         now = self.clock.now()
         self.map.set_state(s.id, SourceState.FOUND, now)
         self.pursuits.found(s.id)
@@ -376,9 +375,9 @@ class RescueBehaviour:
         if target is not None:
             if b.kind in (ContactKind.BUMPER, ContactKind.RANGE):
                 # A touch at her estimate is a cue (a victim under a slab is touched, not reached): judged now.
-                s = self.map.source(target.id)
-                (_, a), = [sa for sa in self._judge({}, contact=s.id) if sa[0].id == s.id]
-                if a.probability >= self.config.p_find:
+                s, a = next(((s, a) for s, a in self._judge({}, contact=target.id) if s.id == target.id),
+                            (None, None))
+                if a is not None and a.probability >= self.config.p_find:
                     self._declare(s, a)
                     if not self.done and b.kind is ContactKind.BUMPER:
                         self.recovery.back_off(b.heading, "clear the bumper after touching the victim")

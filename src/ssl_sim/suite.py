@@ -321,16 +321,21 @@ def scenarios(split: str, count: int | None = None) -> list[Scenario]:
     return [generate(split, i) for i in indices(split, count)]
 
 
-def indices(split: str, count: int | None = None) -> list[int]:
-    """The indices of :func:`scenarios` (test: ``test_indices()[:count]``; train: ``0..count-1``, default TEST_SIZE)."""
+def indices(split: str, count: int | None = None, first: int = 0) -> list[int]:
+    """The indices of :func:`scenarios` (test: ``test_indices()[:count]``; train: ``first..first+count-1``,
+    default count TEST_SIZE: a train range apart from the one a model was fitted on is a held-out check)."""
     _check_split(split)
     if count is not None and (not isinstance(count, int) or count < 1):
         raise ValueError(f"count: expected an integer >= 1, got {count!r}")
+    if not isinstance(first, int) or first < 0:
+        raise ValueError(f"first: expected an integer >= 0, got {first!r}")
     if split == "test":
+        if first:
+            raise ValueError(f"first: the test split is fixed and taken whole or from its start, got first={first}")
         if count is not None and count > TEST_SIZE:
             raise ValueError(f"count: the test split has {TEST_SIZE} scenarios, got {count}")
         return test_indices()[:count]
-    return list(range(count or TEST_SIZE))
+    return list(range(first, first + (count or TEST_SIZE)))
 
 
 def summary_row(sc: Scenario) -> dict[str, Any]:
@@ -438,7 +443,8 @@ def _write(sc: Scenario, out: Path) -> Path:
     return path
 
 
-def write_scenarios(split: str, out_dir: str | Path, count: int | None = None) -> list[Path]:
-    """Write the first ``count`` scenarios of ``split`` (see :func:`scenarios`) to ``out_dir``; returns their files."""
+def write_scenarios(split: str, out_dir: str | Path, count: int | None = None, first: int = 0) -> list[Path]:
+    """Write ``count`` scenarios of ``split`` from index ``first`` (see :func:`indices`) to ``out_dir``; returns
+    their files."""
     out = Path(out_dir)
-    return [_write(generate(split, i), out) for i in indices(split, count)]
+    return [_write(generate(split, i), out) for i in indices(split, count, first)]
