@@ -69,14 +69,21 @@ def test_a_voiceless_machine_is_never_declared_found(where, seed):
 
 
 def test_successive_steps_across_a_bearing_build_a_baseline():
-    # Not model-dependent: the options choose two steps across the bearing of a caller 3.2 m away (one bearing
-    # leaves her range open). Two bearings from poses 0.8 m apart cross at 14 deg there; from the same pose they
-    # do not cross at all. Fails now: the second step goes to the other side of the current pose, back to the start.
+    # Not model-dependent. A caller 3.2 m away: one bearing leaves her range open and a 0.4 m step subtends 7 deg
+    # there, so the options choose two steps across her bearing in a row. The second must take the robot to a new
+    # pose: two bearings from one pose do not cross. Fails now: every other step goes to the other side of the
+    # current pose, back to where the step before started.
     w = World([Source((2.5, 2.0, 0.1), 62.0)])
     b = make(w)
-    steps = []
-    for _ in range(2):
-        ev = b.step()
-        steps += [e for e in ev if e.decision is Decision.DRIVE and "triangulate" in e.reason]
-    assert len(steps) == 2, [e.reason for e in b.events]
-    assert math.hypot(*w.pose()[:2]) >= 1.5 * b.options.baseline_step_m
+    for _ in range(3):
+        b.step()
+    start, steps = None, []
+    for e in b.events:
+        if e.decision in (Decision.HEARD, Decision.NO_SOURCE):
+            start = e.data.pose[:2]
+        elif e.decision is Decision.DRIVE:
+            steps.append((start, e.data.goal) if "triangulate" in e.reason else None)
+    pairs = [(a, c) for a, c in zip(steps, steps[1:]) if a is not None and c is not None]
+    assert pairs, [e.reason for e in b.events if e.decision is not Decision.HEARD]
+    for (start1, _), (_, goal2) in pairs:
+        assert math.dist(start1, goal2) >= b.options.baseline_step_m, (start1, goal2)
