@@ -139,8 +139,7 @@ def recording(tmp_path_factory):
     (["--set", "listen_s=abc"], "--set listen_s: expected a number"),
     (["--set", "listen_s=nan"], "--set listen_s: expected a finite number"),
     (["--set", "listen_s=-1"], "listen_s"),
-    (["--set", "reject_after_listens=2.5"], "--set reject_after_listens: expected an integer"),
-    (["--set", "require_voice=maybe"], "--set require_voice: expected true/false"),
+    (["--set", "max_victims=2.5"], "--set max_victims: expected an integer"),
     (["--set", "colour=red"], "--set: unknown key(s) ['colour']"),
     (["--set", "listen_s"], "--set 'listen_s': expected FIELD=VALUE"),
 ])
@@ -150,6 +149,15 @@ def test_ssl_robot_bad_options_are_one_line_naming_the_option(recording, capsys,
     err = capsys.readouterr().err.strip()
     assert code == 2 and len(err.splitlines()) == 1 and err.startswith("ssl-robot: error: ") and option in err, err
     assert "rescue on" not in out.getvalue()  # refused before the mission started
+
+
+def test_ssl_robot_retired_field_is_ignored_with_a_warning_naming_it(recording):
+    # A field no decision reads any more (RescueConfig.RETIRED): old command lines still run, told what is ignored.
+    out = io.StringIO()
+    with pytest.warns(FutureWarning, match=r"--set require_voice: no longer a field .*ignored"):
+        code = robot_main(["--dry-run", "--replay", str(recording), "--max-time", "2", "--set", "require_voice=maybe"],
+                          out=out)
+    assert code == 0 and "rescue on" in out.getvalue()
 
 
 def test_one_coercion_for_text_and_toml():

@@ -14,7 +14,7 @@ from robot.ranging import RangeLayout
 from robot.replay import DryRunDrive
 from robot.events import ContactPayload
 from robot.rescue import Decision, FindCriterion, RescueBehaviour, RescueConfig, RescueEvent
-from robot.sound_map import SourceClass, SourceState
+from robot.sound_map import SourceClass
 from ssl_core.geometry import cube8
 from sound_dataset import recordings
 
@@ -185,23 +185,17 @@ def test_maps_a_caller_and_drives_toward_its_estimate():
     w = World([Source((2.5, 2.0, 0.1), 62.0)])
     b = make(w)
     ev = b.step()
-    # The stand-in VAD hears no speech in the first listen: a voiceless source heard once is no target yet
-    # (planner min_unknown_listens), the robot listens again where it is.
-    assert decisions(ev) == [Decision.HEARD, Decision.NO_TARGET] and "listen again" in ev[-1].reason
-    assert w.pose() == pytest.approx((0.0, 0.0, 0.0), abs=1e-9)
-    ev = b.step()
-    assert decisions(ev)[:2] == [Decision.HEARD, Decision.TARGET]
-    assert ev[-1].decision is Decision.DRIVE
-    target = ev[1]
-    # from one pose the range comes from the elevation: the estimate lies along the true bearing
-    est = np.array(target.data.position[:2])
-    assert abs(math.atan2(est[1], est[0]) - math.atan2(2.0, 2.5)) < math.radians(4)
+    # One bearing leaves the range open (the height prior only): the estimate lies along the true bearing, metres
+    # wide, and the step worth most is across that bearing (a second bearing from a new pose crosses the first).
+    assert decisions(ev) == [Decision.HEARD, Decision.DRIVE] and "triangulate" in ev[-1].reason
+    (s,) = b.map.sources
+    assert abs(math.atan2(s.position[1], s.position[0]) - math.atan2(2.0, 2.5)) < math.radians(4)
+    assert s.horizontal_sigma_m > 1.0
     x, y, yaw = w.pose()
-    assert math.hypot(x, y) == pytest.approx(b.config.step_m, abs=0.05)
-    # its range is still open (one bearing): toward it, 30 deg off the bearing for a baseline, holonomically
+    assert math.hypot(x, y) == pytest.approx(b.options.baseline_step_m, abs=0.03)
     off = math.degrees(math.atan2(y, x) - math.atan2(2.0, 2.5))
-    assert abs(abs(off) - b.planner.config.probe_angle_deg) < 8
-    assert abs(yaw) < math.radians(2)                                       # without turning
+    assert abs(abs((off + 180) % 360 - 180) - 90) < 6                       # across the bearing
+    assert abs(yaw) < math.radians(2)                                       # without turning (holonomic)
     np.testing.assert_allclose(b.pose, w.pose(), atol=1e-9)
     assert w.drive.commands[-1].twist == (0.0, 0.0, 0.0)
     assert all(isinstance(e, RescueEvent) and e.reason for e in ev)
@@ -219,34 +213,49 @@ def test_finds_two_callers_once_each_at_their_estimated_positions():
     assert len({e.data.source for e in found}) == 2
     # after the first find, its calls were heard again and ignored as found
     after = ev[ev.index(found[0]) + 1:]
-    assert any("is found victim #1" in s for e in after if e.decision is Decision.HEARD for s in e.data.ignored)
+    first = found[0].data.source
+    assert any(f"is found source #{first}" in s for e in after if e.decision is Decision.HEARD for s in e.data.ignored)
     assert all(e.data.source not in {f.data.source for f in found[:1]}
                for e in after if e.decision is Decision.TARGET)
 
 
-def test_machine_is_never_approached_while_a_caller_is_mapped():
+def _machine_and_caller():
     machine = Source((1.2, -0.8, 0.3), 75.0, voice=False)    # near and much louder
     caller = Source((-2.5, 1.5, 0.1), 62.0)
     w = World([machine, caller], seed=6)
     b = make(w, RescueConfig(max_victims=1))
-    ev = b.run(max_time=150.0)
+    return machine, caller, b, b.run(max_time=150.0)
+
+
+def test_a_machine_beside_a_caller_is_mapped_as_a_machine_and_the_caller_found():
+    # Behavioural (depends on the fitted found model, robot/models/found_model.json).
+    machine, caller, b, ev = _machine_and_caller()
     assert found_events(ev) and math.dist(found_events(ev)[0].data.position, caller.position[:2]) < 0.3
-    # the machine is mapped as an interferer (in line with the drive its range stays open: its class is the point)
+    assert all(math.dist(e.data.position, machine.position[:2]) > 1.0 for e in found_events(ev))
     m_src = [s for s in b.map.sources if s.cls is SourceClass.INTERFERER and s.n_listens >= 3]
-    assert m_src
+    assert m_src and math.dist(m_src[0].position[:2], machine.position[:2]) < 0.5
+
+
+def test_machine_is_never_approached_while_a_caller_is_mapped():
+    # Fails with the current options (they read no cue weight, only the fitted confirm probability): the machine,
+    # unknown then an interferer at P(victim) 0.07, is approached while the caller's wide estimate (+- 1.5-3 m) is
+    # mapped (little of it within reach, so she is worth less per second than the tight machine).
+    machine, caller, b, ev = _machine_and_caller()
+    m_src = [s for s in b.map.sources if s.cls is SourceClass.INTERFERER and s.n_listens >= 3]
     targets = {e.data.source for e in ev if e.decision is Decision.TARGET}
     assert m_src[0].id not in targets
     # and the robot kept its distance from the machine
     assert min(math.dist(e.data.pose[:2], machine.position[:2]) for e in ev if e.decision is Decision.HEARD) > 1.0
 
 
-def test_machine_alone_is_checked_and_rejected_never_found():
+def test_machine_alone_is_never_found():
+    # Behavioural (depends on the fitted found model): a voiceless machine, close by and loud, heard for 80 s.
     w = World([Source((1.8, 0.0, 0.3), 70.0, voice=False)], seed=2)
     b = make(w)
     ev = b.run(max_time=80.0)
-    assert not found_events(ev)
-    assert any(e.decision is Decision.REJECTED for e in ev)
-    assert all(s.state is SourceState.REJECTED for s in b.map.sources if s.n_listens >= 5)
+    assert not found_events(ev) and not b.victims
+    heard = [s for s in b.map.sources if s.n_listens >= 5]
+    assert heard and all(s.cls is SourceClass.INTERFERER for s in heard)
 
 
 def test_bump_maps_the_obstacle_and_the_plan_goes_around_it():
@@ -280,16 +289,15 @@ def test_range_sensors_see_the_wall_and_the_plan_goes_around_it_without_touching
     assert len(occ) >= 5 and np.all(np.abs(occ[:, 0] - 1.2) < 0.25) and np.ptp(occ[:, 1]) > 0.6
 
 
-def test_bump_at_an_unreachable_caller_counts_as_found():
-    # The caller is in rubble (an obstacle disc around it): the robot can only touch the rubble.
+def test_a_caller_inside_rubble_is_found_from_its_edge():
+    # Behavioural (depends on the fitted found model). The caller is in rubble (an obstacle disc of 0.3 m around
+    # her): the robot's base cannot come closer than 0.5 m, yet the find needs only the base within 1.5 m.
     w = World([Source((1.6, 0.0, 0.1), 65.0)], obstacles=[(1.6, 0.0, 0.3)], seed=2)
-    cfg = RescueConfig(found_elevation_deg=80.0, corroborated_elevation_deg=80.0, found_distance_m=0.05,
-                       max_victims=1)
-    b = make(w, cfg)
+    b = make(w, RescueConfig(max_victims=1))
     ev = b.run(max_time=80.0)
     found = found_events(ev)
-    assert len(found) == 1 and "bumped into it" in found[0].reason
-    assert math.dist(found[0].data.position, (1.6, 0.0)) < 0.3
+    assert len(found) == 1 and math.dist(found[0].data.position, (1.6, 0.0)) < 0.3
+    assert math.dist(w.pose()[:2], (1.6, 0.0)) <= 1.5
 
 
 def test_wheel_stall_triggers_recovery():
@@ -409,10 +417,12 @@ def test_listens_standing_still_with_fresh_audio():
 
 def test_silence_leads_to_exploration_and_audio_end_finishes():
     w = World([])
-    b = make(w, RescueConfig(explore_after_silent=2))
-    ev = b.step() + b.step()
-    assert decisions(ev) == [Decision.NO_SOURCE, Decision.NO_TARGET, Decision.NO_SOURCE, Decision.EXPLORE]
+    b = make(w)
+    ev = b.step()
+    # nothing heard on a floor no listen has covered: a step toward where a listen hears the most unheard floor
+    assert decisions(ev) == [Decision.NO_SOURCE, Decision.EXPLORE]
     assert math.hypot(*w.pose()[:2]) == pytest.approx(b.config.step_m, abs=0.03)
+    assert w.drive.commands[-1].twist == (0.0, 0.0, 0.0)
 
     class Ending(FakeAudio):
         def read(self, n):
@@ -449,14 +459,16 @@ def test_keeps_its_target_between_two_intermittent_callers():
 def test_config_errors_name_the_field():
     with pytest.raises(ValueError, match="RescueConfig.listen_s"):
         RescueConfig(listen_s=0)
-    with pytest.raises(ValueError, match="found_distance_m"):
-        RescueConfig(found_distance_m=0.0)
+    with pytest.raises(ValueError, match="RescueConfig.p_find: expected a probability"):
+        RescueConfig(p_find=1.0)
+    with pytest.raises(TypeError, match="found_distance_m"):       # a retired field is no keyword any more
+        RescueConfig(found_distance_m=0.3)
     with pytest.raises(ValueError, match="max_victims"):
         RescueConfig(max_victims=0)
     with pytest.raises(ValueError, match="RescueConfig.voice_scan_deg"):
         RescueConfig(voice_scan_deg=-15.0)
     w = World([])
-    with pytest.raises(ValueError, match=r"RescueConfig.mouth_height_m: expected below the array \(ArrayMount"):
+    with pytest.raises(ValueError, match=r"SoundMapConfig.source_height_m: expected below the array \(ArrayMount"):
         make(w, mount=ArrayMount(height_m=0.08))
     w = World([])
     with pytest.raises(ValueError, match="geometry: 8 microphones but the audio source has 4"):
@@ -472,11 +484,8 @@ def test_listening_takes_the_block_duration_even_if_the_source_does_not():
 
     b = make(w, RescueConfig(settle_s=0.0, listen_s=0.5), audio=Instant(w.clock))
     t0 = w.clock.now()
-    b.step()
-    assert w.clock.now() - t0 == pytest.approx(0.5)
-
-
-# --- signals ---------------------------------------------------------------------
+    ev = b.step()
+    assert ev[0].decision is Decision.NO_SOURCE and ev[0].time - t0 == pytest.approx(0.5)
 
 def _voice(n, seed, f0=130.0):
     """Voiced speech model: jittered glottal pulses, -12 dB/oct source, 3 formants, lip radiation."""
@@ -572,36 +581,31 @@ class PausingLocalizer(FakeLocalizer):
         return res
 
 
-def test_a_caller_who_pauses_at_its_estimate_is_found_not_rejected_as_a_reflection():
-    # Buried and faint (levels in dB re full scale as the simulated capture chain gives them): the VAD hears its
+def test_a_caller_who_pauses_at_its_estimate_is_found():
+    # Behavioural (depends on the fitted found model). Buried and faint (levels in dB re full scale as the simulated capture chain gives them): the VAD hears its
     # speech in one listen of four, so mostly the elevation and level cues tell it from a reflection (light
-    # rubble seed 7). Never heard with speech at all, its silent listens make it an interferer, rejected.
+    # rubble seed 7).
     caller = Source((2.2, 0.6, 0.1), -50.0)
     w = World([caller], seed=5)
     calls = iter(range(10**6))
     b = make(w, RescueConfig(max_victims=1), localizer=PausingLocalizer(w),
              speech=lambda *a: 0.3 if next(calls) % 4 == 3 else 0.0)
     ev = b.run(max_time=120.0)
-    assert not [e for e in ev if e.decision is Decision.REJECTED], [str(e) for e in ev]
     found = found_events(ev)
     assert len(found) == 1 and math.dist(found[0].data.position, caller.position[:2]) < 0.3
 
 
-def test_a_voiced_mouth_right_below_heard_once_is_listened_to_again_not_left():
-    """A caller 0.3 m from the robot and 0.2 m below the array (34 deg down: a mouth within reach) heard in the
-    first listen only starts a source of one bearing; the robot listens again where it stands and declares her
-    on the second listen instead of stepping away across that bearing."""
+def test_a_voiced_mouth_right_below_is_declared_within_two_listens():
+    """Behavioural (depends on the fitted found model). A caller 0.3 m from the robot and 0.2 m below the array
+    (34 deg down: a mouth within reach) is declared by the second listen, reported where she is, the robot never
+    farther than one step from its start."""
     caller = Source((0.3, 0.0, 0.1), 62.0)
     w = World([caller], seed=1)
     b = make(w, RescueConfig(max_victims=1), speech=always_speech)
-    ev = b.step()
-    assert decisions(ev) == [Decision.HEARD, Decision.NO_TARGET] and "one listen only" in ev[-1].reason
-    ev += b.step()
+    ev = b.step() + b.step()
     found = found_events(ev)
-    assert len(found) == 1 and "steeper than -30 deg" in found[0].reason
-    assert math.dist(found[0].data.position, caller.position[:2]) < 0.15
-    assert w.pose() == pytest.approx((0.0, 0.0, 0.0), abs=1e-9)      # it never moved
-    assert not any(any(c.twist) for c in w.drive.commands)
+    assert len(found) == 1 and math.dist(found[0].data.position, caller.position[:2]) < 0.15
+    assert math.hypot(*w.pose()[:2]) <= b.config.step_m + 1e-6
 
 
 def test_contacts_and_finds_are_counted_by_kind_in_the_results():
@@ -636,7 +640,6 @@ def test_contacts_and_finds_are_counted_by_kind_in_the_results():
     assert counts["contacts_by_kind"]["fault"] == 0
     assert set(counts["finds_by_criterion"]) == {c.value for c in FindCriterion}
     assert sum(counts["finds_by_criterion"].values()) == 1
-    assert b.victims[0].cue in (FindCriterion.STEEP_BEARING, FindCriterion.LEVEL_RISE)
     assert counts["finds_by_criterion"][b.victims[0].cue.value] == 1
     # a declaration scored anything but "find" is not counted
     assert sum(outcome_counts(b, [{"kind": "false_find", "cue": b.victims[0].cue}])["finds_by_criterion"].values()) == 0
