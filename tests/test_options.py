@@ -88,9 +88,13 @@ def test_the_current_target_keeps_winning_against_an_equal_other(current):
     assert Scene().choose([worse, other], current=current).source.id == current
 
 
-def test_a_wide_source_close_by_is_triangulated():
-    o = Scene().choose([src(1, 2.0, 0.0, p=0.9, sigma=1.5)])
+def test_a_wide_source_at_the_robot_is_triangulated_a_far_one_approached():
+    """At its estimate (0.3 m) with its range open (1-sigma 0.9 m), a 0.4 m step across the bearing narrows it to
+    ~5 cm and costs less than the spread an approach would drive through; from 3 m away the approach's own
+    bearings do that on the way."""
+    o = Scene().choose([src(1, 0.3, 0.0, p=0.9, sigma=0.9)])
     assert o.kind is OptionKind.TRIANGULATE and o.source.id == 1 and o.plan is None
+    assert Scene().choose([src(1, 3.0, 0.0, p=0.9, sigma=0.9)]).kind is OptionKind.APPROACH
 
 
 def test_with_nothing_mapped_on_fresh_floor_explore_or_listen():

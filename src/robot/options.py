@@ -2,15 +2,15 @@
 
 Options (``OptionKind``), each valued from the belief (world/odometry frame):
 
-* **approach** a mapped source: ``P(victim there) * P(she is within reach of the estimate) / (t_drive + t_confirm)``.
-  P(victim there) is the map's voice evidence after the pursuit's misses (``robot.pursuit``) times the mass of the
-  estimate's Gaussian inside the search area (a mirror image beyond a wall, a machine outside the area: little
-  mass, little value). Within reach: the Gaussian mass within ``REACH_M`` of the estimate (a find needs the base
-  within 1.5 m and the report within 0.5 m of her). ``t_drive`` is the path at the drive speed plus a listen per
-  step; ``t_confirm`` the cycle time over the per-listen confirm probability;
-* **triangulate** (a step of ``baseline_step_m`` across the bearing): the same victims, confirmed later but with
-  the covariance one more bearing from a new pose gives (information gain as the shrink of the position's
-  1-sigma: range x bearing noise / sin(angle the step subtends));
+* **approach** a mapped source: ``P(victim there) / (t_drive(path + sigma) + t_confirm)``. P(victim there) is the
+  map's voice evidence after the pursuit's misses (``robot.pursuit``) times the mass of the estimate's Gaussian
+  inside the search area (a mirror image beyond a wall, a machine outside the area: little mass, little value).
+  Bearings heard on the way narrow a loose estimate, and its 1-sigma is the path it may still move by: a loose
+  estimate costs time, not probability. ``t_drive`` is the path at the drive speed plus a listen per step;
+  ``t_confirm`` the cycle time over the per-listen confirm probability;
+* **triangulate** (a step of ``baseline_step_m`` across the bearing): the same victim, after the step, with the
+  1-sigma one more bearing from the new pose gives (range x bearing noise / sin(angle the step subtends)): worth
+  more than approaching when the step costs less than the spread it removes (information gain in time);
 * **explore** (drive to where a listen hears the most still-unheard floor, ``robot.coverage``) and **listen** again
   where the robot stands: the prior density of callers times the floor a listen there would newly hear times the
   detection probability, each caller heard costing ``follow_s`` more to confirm;
@@ -31,17 +31,13 @@ from scipy.special import ndtr
 
 from robot.config_values import need
 from robot.coverage import ListeningCoverage
-from robot.found import BASE_RADIUS_M, FIND_RADIUS_M
+from robot.found import FIND_RADIUS_M
 from robot.occupancy import OccupancyGrid
 from robot.planner import Plan, Planner
 from robot.pursuit import Pursuits
 from robot.sound_map import MapSource, SourceClass, SourceState
 
-__all__ = ["OptionKind", "Option", "OptionsConfig", "choose", "REACH_M"]
-
-#: An approach ends in a find only if she lies within this of the estimate: the base may stop this far from her
-#: and still report within the find radius of the estimate.
-REACH_M = BASE_RADIUS_M - FIND_RADIUS_M
+__all__ = ["OptionKind", "Option", "OptionsConfig", "Timing", "area_mass", "choose"]
 
 
 class OptionKind(StrEnum):
@@ -98,11 +94,6 @@ class Timing:
         return self.cycle_s / self.confirm_probability
 
 
-def disk_mass(sigma_m: float, radius_m: float) -> float:
-    """Mass of a circular Gaussian (1-sigma ``sigma_m``) within ``radius_m`` of its mean."""
-    return -math.expm1(-radius_m ** 2 / (2.0 * max(sigma_m, 1e-3) ** 2))
-
-
 def area_mass(s: MapSource, area: tuple[float, float, float, float] | None) -> float:
     """Mass of the source's horizontal Gaussian inside the search area (1 without one)."""
     if area is None:
@@ -133,14 +124,15 @@ def choose(sources: Sequence[MapSource], pursuits: Pursuits, planner: Planner, g
         sig = s.horizontal_sigma_m
         plan = planner.plan(grid, xy, planner.goal_of(s, pose), _search=search)
         if plan is not None:
-            v = bonus * p * disk_mass(sig, REACH_M) / (timing.drive_s(plan.length) + timing.confirm_s)
+            # Bearings taken on the way narrow the estimate; its spread costs the path it may move by.
+            v = bonus * p / (timing.drive_s(plan.length + sig) + timing.confirm_s)
             options.append(Option(OptionKind.APPROACH, v, plan, s,
                                   f"P(victim there) {p:.2f}, +- {sig:.2f} m, path {plan.length:.2f} m"))
         d = s.distance_to(xy)
         if sig > FIND_RADIUS_M and d > 1e-6:
             step = config.baseline_step_m
             after = min(sig, max(0.05, d * timing.bearing_sigma / math.sin(math.atan2(step, d))))
-            v = bonus * p * disk_mass(after, REACH_M) / (timing.drive_s(step) + d / timing.speed + timing.confirm_s)
+            v = bonus * p / (timing.drive_s(step) + timing.drive_s(d + after) + timing.confirm_s)
             options.append(Option(OptionKind.TRIANGULATE, v, None, s,
                                   f"P(victim there) {p:.2f}, +- {sig:.2f} m now, ~{after:.2f} m after a "
                                   f"{step:g} m step across its bearing"))

@@ -93,8 +93,11 @@ class Pursuits:
         return p_victim * q / (p_victim * q + 1.0 - p_victim) if 0 < p_victim < 1 else p_victim
 
     def missed(self, source_id: int) -> None:
+        """A listen at its estimate that did not confirm it (a set-aside or found source keeps its phase)."""
         p = self.of(source_id)
-        p.phase, p.misses = Phase.CLOSE, p.misses + 1
+        p.misses += 1
+        if p.phase is Phase.APPROACH:
+            p.phase = Phase.CLOSE
 
     def moved_away(self, source_id: int) -> None:
         p = self.of(source_id)

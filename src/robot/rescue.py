@@ -110,7 +110,6 @@ class RescueBehaviour:
         self.plan: Plan | None = None
         self._spot: list[ListenEvidence] = []     # every bearing heard from the current spot (robot frame) ...
         self._spot_at: np.ndarray | None = None   # ... and that spot's pose
-        self._side = 1.0                          # alternating side of steps across a bearing
         self._faults_seen: tuple[str, ...] = ()
         self._step_events: list[RescueEvent] = []
         self._started = False
@@ -305,9 +304,9 @@ class RescueBehaviour:
                                                f"{self.pursuits.config.max_steps_across} steps across its bearing: "
                                                "set aside a while", SourcePayload(s.id))
                 return
+            # Always the same way round the source: each step widens the angle the bearings cross at.
             x, y, _ = self.pose
-            a = math.atan2(s.position[1] - y, s.position[0] - x) + self._side * math.pi / 2
-            self._side = -self._side
+            a = math.atan2(s.position[1] - y, s.position[0] - x) + math.pi / 2
             goal = np.array([x, y]) + self.options.baseline_step_m * np.array([math.cos(a), math.sin(a)])
             self._follow(goal[None], RescueState.APPROACH, Decision.DRIVE, s, f"triangulate #{s.id}: {o.why}")
         elif o.kind is OptionKind.EXPLORE:
