@@ -82,8 +82,8 @@ def _pool(fn, args, workers: int):
         return list(ex.map(fn, *zip(*args)))
 
 
-def collect(first: int, count: int, workers: int) -> None:
-    out = _pool(_label_run, [(i,) for i in range(first, first + count)], workers)
+def collect(first: int, count: int, workers: int, p_find: float | None = None) -> None:
+    out = _pool(_label_run, [(i, p_find) for i in range(first, first + count)], workers)
     rows = [r for rs, _ in out for r in rs]
     OUT.mkdir(parents=True, exist_ok=True)
     buf = io.StringIO()
@@ -241,6 +241,7 @@ def main(argv=None) -> None:
     c.add_argument("--first", type=int, default=0)
     c.add_argument("--count", type=int, default=48)
     c.add_argument("--workers", type=int, default=2)
+    c.add_argument("--p-find", type=float, default=None, help="the collecting behaviour's p_find (default its own)")
     f = sub.add_parser("fit")
     f.add_argument("--dry-run", action="store_true", help="print the fit, write nothing")
     k = sub.add_parser("curve")
@@ -250,7 +251,7 @@ def main(argv=None) -> None:
     k.add_argument("--workers", type=int, default=2)
     a = ap.parse_args(argv)
     if a.cmd == "collect":
-        collect(a.first, a.count, a.workers)
+        collect(a.first, a.count, a.workers, a.p_find)
     elif a.cmd == "fit":
         fit(write=not a.dry_run)
     else:

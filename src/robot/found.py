@@ -20,6 +20,8 @@ Why these cues, physically:
   a machine or its echo is no victim however well placed;
 * ``position``: log-odds of the map's Gaussian mass inside the find radius around its estimate (from the
   triangulation's covariance): a tight estimate is where she is, a loose one may be metres off;
+* ``support``, ``consistency``, ``crossing``: how many listens agree with the estimate, what share of its
+  listens do, and how wide their bearings cross: a reflection's image moves as the robot moves, a mouth does not;
 * ``distance``: how far the robot's base is from the estimate: the find needs the base near her;
 * ``beyond_reach``: how far the base is beyond 1 m of the estimate (the find's base radius less its report
   radius): a hinge, as the log-odds of a find fall steeply there;
@@ -30,6 +32,8 @@ Why these cues, physically:
   another caller);
 * ``level_rise``: how much louder the source is now than in its faintest listen (inverse-square law: a caller
   approached from 3 m to 0.5 m rises ~15 dB; a reflection rises less);
+* ``at_loudest``: the level heard now against its loudest listen: approaching a mouth, its direct sound keeps
+  rising;
 * ``coherence``: the SRP-PHAT peak power of the bearing heard now: within the room's critical distance the direct
   sound dominates and the peak is high, sound that came around a wall or from far away is diffuse;
 * ``heard``: the source was heard in this listen at all (a caller pauses; a model trained with it learns how much a
@@ -152,6 +156,52 @@ class BeyondReach:
 
 
 @dataclass(frozen=True)
+class Support:
+    """log(1 + listens consistent with the estimate): a position many bearings agree on."""
+
+    name: str = "support"
+
+    def feature(self, ctx: FoundContext) -> float:
+        return math.log1p(ctx.source.n_inliers)
+
+
+@dataclass(frozen=True)
+class Consistency:
+    """Share of the source's listens consistent with its estimate: a reflection's bearings scatter as the robot
+    moves (its image moves with the geometry), a mouth's stay on one point."""
+
+    name: str = "consistency"
+
+    def feature(self, ctx: FoundContext) -> float:
+        return ctx.source.n_inliers / max(ctx.source.n_listens, 1)
+
+
+@dataclass(frozen=True)
+class Crossing:
+    """Sine of the widest angle two of its bearings from different poses cross at: how well geometry fixes the
+    range (a narrow crossing leaves it open along the bearing)."""
+
+    name: str = "crossing"
+
+    def feature(self, ctx: FoundContext) -> float:
+        return math.sin(math.radians(min(ctx.source.crossing_deg, 90.0)))
+
+
+@dataclass(frozen=True)
+class AtLoudest:
+    """The level heard now against the loudest listen of it, (now - max) / 10 dB in [-3, 0]: approaching a mouth
+    its direct sound keeps rising (inverse-square law), so near her the listen now is the loudest; 0 when not heard
+    (``heard`` carries that)."""
+
+    name: str = "at_loudest"
+
+    def feature(self, ctx: FoundContext) -> float:
+        if ctx.heard is None:
+            return 0.0
+        return float(np.clip((ctx.heard.level_db - ctx.source.max_level_db) / 10.0, -3.0, 0.0))
+
+
+@dataclass(frozen=True)
 class Depression:
     name: str = "depression"
 
@@ -265,7 +315,8 @@ def is_echo(ev, spot: Sequence) -> bool:
 
 
 #: Every cue, in the order of the model's weights.
-CUES: tuple[Cue, ...] = (Voice(), Position(), Distance(), BeyondReach(), Depression(), RangeAgreement(), LevelRise(), Coherence(),
+CUES: tuple[Cue, ...] = (Voice(), Position(), Support(), Consistency(), Crossing(), Distance(), BeyondReach(),
+                         AtLoudest(), Depression(), RangeAgreement(), LevelRise(), Coherence(),
                          HeardNow(), Echo(), NearMachine(), NearFound(), Contact(), Triangulated())
 
 #: The find criterion reported for the cue that added most to a find's log-odds.
