@@ -93,7 +93,9 @@ def test_a_wide_source_at_the_robot_is_triangulated_a_far_one_approached():
     ~5 cm and costs less than the spread an approach would drive through; from 3 m away the approach's own
     bearings do that on the way."""
     o = Scene().choose([src(1, 0.3, 0.0, p=0.9, sigma=0.9)])
-    assert o.kind is OptionKind.TRIANGULATE and o.source.id == 1 and o.plan is None
+    assert o.kind is OptionKind.TRIANGULATE and o.source.id == 1
+    step = o.plan.waypoints[-1]                # 0.4 m from the robot, at right angles to the bearing
+    assert np.hypot(*step) == pytest.approx(0.4) and abs(step[0]) < 1e-9
     assert Scene().choose([src(1, 3.0, 0.0, p=0.9, sigma=0.9)]).kind is OptionKind.APPROACH
 
 

@@ -50,7 +50,6 @@ P_FIND = 0.8      # the threshold the confirm probability is measured at (Rescue
 # ----------------------------------------------------------------------------- collecting
 def _label_run(index: int, p_find: float | None = None) -> tuple[list[dict], dict]:
     """Run train scenario ``index``; its assessments with labels, and the run's find summary."""
-    from robot.rescue import RescueConfig
     from ssl_sim.runner import RescueRun
     from ssl_sim.suite import generate
 

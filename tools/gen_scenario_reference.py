@@ -15,6 +15,9 @@ import re
 from pathlib import Path
 
 from robot.coverage import CoverageConfig
+from robot.options import OptionsConfig
+from robot.pursuit import PursuitConfig
+from robot.recovery import RecoveryConfig
 from robot.motion import MotionConfig
 from robot.occupancy import OccupancyConfig
 from robot.planner import PlannerConfig
@@ -39,7 +42,8 @@ KEYS = {
          "acoustics": "table: the acoustic simulation", "localizer": "table: the localization engine",
          "behaviour": "table: the rescue decisions", "motion": "table: motion primitives",
          "sound_map": "table: the sound map", "planner": "table: the planner", "occupancy": "table: the obstacle grid",
-         "coverage": "table: listening coverage",
+         "coverage": "table: listening coverage", "pursuit": "table: per-source pursuit limits",
+         "options": "table: valuing the next move", "recovery": "table: getting free",
          "ego_noise": "table: the drive's own motor noise (on unless `enabled = false`)"},
     "scene": {"name": "a named scene (`empty_lab`, `light_rubble`, `dense_collapsed_room`)",
               "file": "a scene TOML file, relative to the scenario", "generate": "a generator preset name",
@@ -64,6 +68,7 @@ STAGES = {"noise": (AmbientNoise, None), "acoustics": (AcousticConfig, S.ACOUSTI
           "localizer": (LocalizerConfig, None), "behaviour": (RescueConfig, None), "motion": (MotionConfig, None),
           "sound_map": (SoundMapConfig, None), "planner": (PlannerConfig, None),
           "occupancy": (OccupancyConfig, None), "coverage": (CoverageConfig, None),
+          "pursuit": (PursuitConfig, None), "options": (OptionsConfig, None), "recovery": (RecoveryConfig, None),
           "ego_noise": (EgoNoiseConfig, None)}
 
 

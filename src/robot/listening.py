@@ -178,11 +178,19 @@ class Listener:
     ``source_range_m``: the range (m) a new track's source is assumed at when the robot's translation re-aims it
     (the tracker's ``source_range``). ``track_voice(track_id)``: the track's voice probability over its listens."""
 
-    def __init__(self, audio: AudioSource, clock: Clock, localizer: Any, mic_positions: np.ndarray | None,
+    def __init__(self, audio: AudioSource, clock: Clock, localizer: Any, mic_positions,
                  voice_threshold: float = 0.2, speech=None, voice_scan_deg: float = 0.0, drive=None,
                  tracker: TrackerConfig | None = None, source_range_m: float = 2.0) -> None:
         self.audio, self.clock, self.localizer = audio, clock, localizer
         self.drive = drive
+        if mic_positions is not None:
+            mic_positions = np.asarray(getattr(mic_positions, "positions", mic_positions), float)
+            if mic_positions.ndim != 2 or mic_positions.shape[0] != audio.n_channels:
+                raise ValueError(f"geometry: {mic_positions.shape[0]} microphones but the audio source has "
+                                 f"{audio.n_channels} channels")
+        loc_fs = getattr(getattr(localizer, "config", None), "fs", None)
+        if loc_fs is not None and int(loc_fs) != audio.sample_rate:
+            raise ValueError(f"localizer fs is {loc_fs} Hz but the audio source delivers {audio.sample_rate} Hz")
         self.mic_positions = mic_positions
         self.voice_threshold = voice_threshold
         self.speech = speech

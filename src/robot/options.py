@@ -52,7 +52,7 @@ class OptionKind(StrEnum):
 class Option:
     kind: OptionKind
     value: float                       # expected victims confirmed per second
-    plan: Plan | None = None           # the path (world m); None: stand and listen
+    plan: Plan | None = None           # the path (world m); None: stand and listen (or recover)
     source: MapSource | None = None
     why: str = ""
 
@@ -94,6 +94,19 @@ class Timing:
         return self.cycle_s / self.confirm_probability
 
 
+def _across(grid: OccupancyGrid, xy: np.ndarray, target_xy, step: float) -> np.ndarray | None:
+    """A point ``step`` m from ``xy`` at right angles to the bearing to ``target_xy``: counter-clockwise round it
+    (always the same way: each step widens the angle the bearings cross at), else clockwise if that cell is
+    blocked; None if both are."""
+    b = math.atan2(target_xy[1] - xy[1], target_xy[0] - xy[0])
+    for side in (1.0, -1.0):
+        goal = xy + step * np.array([math.cos(b + side * math.pi / 2), math.sin(b + side * math.pi / 2)])
+        ij = grid.cell(goal)
+        if grid.inside(ij) and not grid.blocked[ij]:
+            return goal
+    return None
+
+
 def area_mass(s: MapSource, area: tuple[float, float, float, float] | None) -> float:
     """Mass of the source's horizontal Gaussian inside the search area (1 without one)."""
     if area is None:
@@ -133,9 +146,11 @@ def choose(sources: Sequence[MapSource], pursuits: Pursuits, planner: Planner, g
             step = config.baseline_step_m
             after = min(sig, max(0.05, d * timing.bearing_sigma / math.sin(math.atan2(step, d))))
             v = bonus * p / (timing.drive_s(step) + timing.drive_s(d + after) + timing.confirm_s)
-            options.append(Option(OptionKind.TRIANGULATE, v, None, s,
-                                  f"P(victim there) {p:.2f}, +- {sig:.2f} m now, ~{after:.2f} m after a "
-                                  f"{step:g} m step across its bearing"))
+            goal = _across(grid, xy, s.position[:2], step)
+            if goal is not None:
+                options.append(Option(OptionKind.TRIANGULATE, v, Plan(goal[None], step), s,
+                                      f"P(victim there) {p:.2f}, +- {sig:.2f} m now, ~{after:.2f} m after a "
+                                      f"{step:g} m step across its bearing"))
     gain = coverage.gain(machines)
     area = listening_area if listening_area is not None else math.pi * coverage.config.hearing_radius_m ** 2
 

@@ -21,19 +21,19 @@ from __future__ import annotations
 import logging
 import math
 from collections import Counter
-from dataclasses import dataclass, fields, replace
-from typing import ClassVar
+from dataclasses import replace
 
 import numpy as np
 
 from robot.coverage import CoverageConfig, ListeningCoverage
-from robot.events import (Decision, DriveFaultPayload, DrivePayload, ErrorPayload, FindCriterion,
-                          FinishPayload, FoundPayload, HeardCandidate, HeardPayload, ObstaclePayload, Payload,
-                          RescueEvent, RescueState, SourcePayload, TargetPayload, TimeUpPayload)
+# The behaviour's vocabulary (robot.events), importable from here too.
+from robot.events import (Decision, DrivePayload, FindCriterion, FoundPayload, HeardCandidate, HeardPayload,
+                          ObstaclePayload, RescueEvent, RescueState, SourcePayload, TargetPayload)
 from robot.found import BASE_RADIUS_M, FIND_RADIUS_M, Assessment, FoundContext, FoundModel, Heard, is_echo
-from robot.hal import AudioSource, Clock, DriveBase, DriveStatus, EndOfAudio
+from robot.hal import AudioSource, Clock, DriveBase
 from robot.kinematics import OmniDriveParams
 from robot.listening import ListenEvidence, Listener
+from robot.mission import Mission
 from robot.motion import Blocked, ContactKind, Motion, MotionConfig
 from robot.mount import ArrayMount
 from robot.occupancy import MapMemoryError, OccupancyConfig, OccupancyGrid
@@ -46,9 +46,12 @@ from robot.recovery import Recovery, RecoveryConfig
 from robot.rescue_config import FoundVictim, RescueConfig
 from robot.sound_map import DISTINCT_POSES_M, MapSource, SoundMap, SoundMapConfig, SourceClass, SourceState
 
+__all__ = ["RescueBehaviour", "RescueConfig", "FoundVictim", "Decision", "FindCriterion", "RescueEvent",
+           "RescueState"]
+
 log = logging.getLogger(__name__)
 
-class RescueBehaviour:
+class RescueBehaviour(Mission):
     """The behaviour on any HAL backend; call ``step()`` repeatedly or ``run(max_time)``.
 
     ``localizer``: ``locate(samples) -> result`` whose ``result.detections`` have ``azimuth``, ``elevation`` (rad,
@@ -68,25 +71,19 @@ class RescueBehaviour:
         if not sound_map.source_height_m < mount.height_m:
             raise ValueError(f"SoundMapConfig.source_height_m: expected below the array (ArrayMount.height_m = "
                              f"{mount.height_m} m), got {sound_map.source_height_m}")
-        self.audio, self.drive, self.clock, self.localizer, self.config = audio, drive, clock, localizer, config
+        super().__init__(drive, clock, config.fatal_faults)
+        self.audio, self.localizer, self.config = audio, localizer, config
         self.mount = mount
-        geometry = geometry if geometry is not None else getattr(localizer, "geometry", None)
-        mics = None if geometry is None else np.asarray(getattr(geometry, "positions", geometry), float)
-        if mics is not None and mics.shape[0] != audio.n_channels:
-            raise ValueError(f"geometry: {mics.shape[0]} microphones but the audio source has "
-                             f"{audio.n_channels} channels")
-        loc_fs = getattr(getattr(localizer, "config", None), "fs", None)
-        if loc_fs is not None and int(loc_fs) != audio.sample_rate:
-            raise ValueError(f"localizer fs is {loc_fs} Hz but the audio source delivers {audio.sample_rate} Hz")
         self.found_model = found_model if found_model is not None else FoundModel.load()
         self.odometry = Odometry(params, start_pose, gyro, travel)
         self.grid = OccupancyGrid(occupancy, origin=np.asarray(start_pose, float)[:2])
         self._scans = RangeScans(self.grid, range_layout)
         self.motion = Motion(drive, clock, self.odometry, motion, fatal=self._check_faults, sensed=self._scans,
                              range_layout=range_layout)
-        self.listener = Listener(audio, clock, localizer, mics, config.voice_threshold, speech, config.voice_scan_deg,
-                                 drive=drive)
-        if speech is None and mics is not None:
+        geometry = geometry if geometry is not None else getattr(localizer, "geometry", None)
+        self.listener = Listener(audio, clock, localizer, geometry, config.voice_threshold, speech,
+                                 config.voice_scan_deg, drive=drive)
+        if speech is None and self.listener.mic_positions is not None:
             _ = self.listener.vad   # the model files checked now (robot.vad.ModelError), not at the first listen
         self.map = SoundMap(sound_map, mount)
         self.coverage = ListeningCoverage(self.grid.origin, self.grid.n, self.grid.resolution, coverage,
@@ -102,63 +99,18 @@ class RescueBehaviour:
         self.contacts: Counter[ContactKind] = Counter()   # every move that ended early, by why (results.json)
         self.recovery = Recovery(self.motion, self.grid, self.coverage, self.contacts, self._emit,
                                  lambda why: self._finish(Decision.STUCK, why), replace(recovery, settle_s=config.settle_s))
-        self.state = RescueState.LISTEN
-        self.events: list[RescueEvent] = []
-        self.victims: list[FoundVictim] = []
+        self.victims: list[FoundVictim] = []      # in the order declared
         self.assessments: list[Assessment] = []   # every P(find) judged, for the fit (tools/fit_found_model.py)
         self.target: int | None = None            # map source id being approached
         self.plan: Plan | None = None
         self._spot: list[ListenEvidence] = []     # every bearing heard from the current spot (robot frame) ...
         self._spot_at: np.ndarray | None = None   # ... and that spot's pose
-        self._faults_seen: tuple[str, ...] = ()
-        self._step_events: list[RescueEvent] = []
         self._started = False
 
-    # -- public API ---------------------------------------------------------------
     @property
     def pose(self) -> np.ndarray:
         """Robot pose (x m, y m, yaw rad) in the odometry frame."""
         return self.odometry.pose
-
-    @property
-    def done(self) -> bool:
-        return self.state is RescueState.DONE
-
-    def step(self) -> list[RescueEvent]:
-        """One listen/act cycle; returns its events. The drive is stopped when it returns or raises."""
-        self._step_events = []
-        if self.done:
-            return []
-        try:
-            self._cycle()
-        except EndOfAudio as exc:   # the source's own end of stream (any other EOFError, e.g. a model's, fails)
-            self._finish(Decision.AUDIO_ENDED, f"audio source exhausted ({exc})")
-        except BaseException as exc:
-            failed = self._safe_stop()
-            outcome = "drive stopped" if failed is None else f"stopping the drive failed too ({failed})"
-            self._emit(Decision.ERROR, f"{type(exc).__name__}: {exc}; {outcome}",
-                       ErrorPayload(type(exc).__name__, failed is None))
-            raise
-        finally:
-            self._safe_stop()
-        return self._step_events
-
-    def run(self, max_time: float) -> list[RescueEvent]:
-        """Step until done or ``max_time`` s of clock time have passed; returns this run's events."""
-        if not max_time > 0:
-            raise ValueError(f"max_time: expected > 0 s, got {max_time}")
-        t_end = self.clock.now() + max_time
-        out: list[RescueEvent] = []
-        try:
-            while not self.done and self.clock.now() < t_end:
-                out += self.step()
-            if not self.done:
-                self._step_events = []
-                self._emit(Decision.TIME_UP, f"mission time of {max_time:g} s used up", TimeUpPayload(max_time))
-                out += self._step_events
-        finally:
-            self._safe_stop()
-        return out
 
     # -- the cycle ----------------------------------------------------------------
     def _cycle(self) -> None:
@@ -304,11 +256,7 @@ class RescueBehaviour:
                                                f"{self.pursuits.config.max_steps_across} steps across its bearing: "
                                                "set aside a while", SourcePayload(s.id))
                 return
-            # Always the same way round the source: each step widens the angle the bearings cross at.
-            x, y, _ = self.pose
-            a = math.atan2(s.position[1] - y, s.position[0] - x) + math.pi / 2
-            goal = np.array([x, y]) + self.options.baseline_step_m * np.array([math.cos(a), math.sin(a)])
-            self._follow(goal[None], RescueState.APPROACH, Decision.DRIVE, s, f"triangulate #{s.id}: {o.why}")
+            self._follow(o.plan.waypoints, RescueState.APPROACH, Decision.DRIVE, s, f"triangulate #{s.id}: {o.why}")
         elif o.kind is OptionKind.EXPLORE:
             self._set_target(None, None)
             self._follow(o.plan.waypoints, RescueState.EXPLORE, Decision.EXPLORE, None, f"explore: {o.why}")
@@ -402,38 +350,3 @@ class RescueBehaviour:
         dx, dy = position[0] - x, position[1] - y
         return float(wrap_angle(math.atan2(dy, dx) - yaw)), float(math.atan2(position[2] - self.mount.height_m,
                                                                              math.hypot(dx, dy)))
-
-    def _check_faults(self, status: DriveStatus) -> bool:
-        faults = tuple(status.faults)
-        if faults != self._faults_seen:
-            new = sorted(set(faults) - set(self._faults_seen))
-            if new:
-                self._emit(Decision.DRIVE_FAULT, f"drive reports fault(s) {', '.join(new)}",
-                           DriveFaultPayload(list(faults)))
-            self._faults_seen = faults
-        fatal = sorted(set(faults) & set(self.config.fatal_faults))
-        if fatal:
-            self._finish(Decision.FAULT, f"fatal drive fault(s) {', '.join(fatal)}: stopping the mission")
-            return True
-        return False
-
-    def _finish(self, decision: Decision, reason: str) -> None:
-        self._safe_stop()
-        self.state = RescueState.DONE
-        self._emit(decision, reason, FinishPayload([v.position for v in self.victims]))
-
-    def _safe_stop(self) -> Exception | None:
-        """Stop the drive; the exception if that failed (logged, never raised)."""
-        try:
-            self.drive.stop()
-        except Exception as exc:  # never mask the original error; the backend's own failsafe must act
-            log.error("drive.stop() failed: %s", exc)
-            return exc
-        return None
-
-    def _emit(self, decision: Decision, reason: str, data: Payload = Payload()) -> RescueEvent:
-        ev = RescueEvent(self.clock.now(), self.state, Decision(decision), reason, data)
-        self.events.append(ev)
-        self._step_events.append(ev)
-        log.info("%s", ev)
-        return ev
