@@ -75,7 +75,8 @@ def _label_run(index: int, p_find: float | None = None, confirm: float | None = 
                      **{k: round(float(a.features.get(k, 0.0)), 6) for k in NAMES}, "label": int(bool(ok))})
     times = [e["time_s"] for e in run.found.values()]
     summary = {"scenario": index, "victims": run.n_victims, "found": len(run.found),
-               "false_finds": sum(1 for d in run.declarations if d["kind"] == "false"),
+               "false_finds": sum(1 for d in run.declarations if d["kind"] == "false_find"),
+               "too_far": sum(1 for d in run.declarations if d["kind"] == "too_far"),
                "find_times": times, "time_limit_s": sc.time_limit_s, "spl": result.get("spl")}
     return rows, summary
 
@@ -223,13 +224,16 @@ def curve(first: int, count: int, values: list[float], workers: int) -> None:
     for pf in values:
         ss = [s for (i, q, _), (_, s) in zip(tasks, out) if q == pf]
         times = [t for s in ss for t in s["find_times"]]
-        rows.append({"p_find": pf, "confirm_probability": round(confirm[pf], 4), "runs": len(ss), "found": sum(s["found"] for s in ss) / sum(s["victims"] for s in ss),
+        rows.append({"p_find": pf, "confirm_probability": round(confirm[pf], 4), "runs": len(ss),
+                     "too_far_per_run": sum(s["too_far"] for s in ss) / len(ss), "found": sum(s["found"] for s in ss) / sum(s["victims"] for s in ss),
                      "false_finds_per_run": sum(s["false_finds"] for s in ss) / len(ss),
                      "mean_time_to_find_s": float(np.mean(times)) if times else None})
         print(json.dumps(rows[-1]))
     OUT.mkdir(parents=True, exist_ok=True)
     (OUT / "p_find_curve.json").write_text(json.dumps({"train_scenarios": f"{first}..{first + count - 1}",
-                                                       "commit": _git_commit(), "rows": rows}, indent=2) + "\n")
+                                                       "commit": _git_commit(), "rows": rows,
+                                                       "runs": [{"p_find": t[1], **s} for t, (_, s) in zip(tasks, out)]},
+                                                      indent=2) + "\n")
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
