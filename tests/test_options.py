@@ -121,3 +121,20 @@ def test_a_step_across_that_cannot_shrink_the_estimate_is_not_preferred_to_appro
     # without the listen after every step_m the approach is charged.
     o = Scene().choose([src(1, 3.0, 0.0, p=0.95, sigma=0.6)])
     assert o.kind is OptionKind.APPROACH, o.why
+
+
+def test_successive_steps_across_a_bearing_go_the_same_way_round():
+    """From each step's end the next step goes on round the source the same way: the bearings from the three
+    poses turn monotonically (a baseline that grows), never back to where the first step started."""
+    s = Scene()
+    source = src(1, 0.3, 0.0, p=0.9, sigma=0.9)
+    poses, pose = [np.array(POSE[:2])], POSE
+    for _ in range(2):
+        o = s.choose([source], pose=pose)
+        assert o.kind is OptionKind.TRIANGULATE
+        pose = (*o.plan.waypoints[-1], 0.0)
+        poses.append(np.array(pose[:2]))
+    bearing = [math.atan2(*(source.position[:2] - q)[::-1]) for q in poses]
+    turns = np.diff(np.unwrap(bearing))
+    assert np.all(turns < 0) or np.all(turns > 0), bearing
+    assert np.hypot(*(poses[2] - poses[0])) > 0.4
