@@ -126,5 +126,6 @@ def test_run_json_is_alone_on_stdout(tmp_path, capsys):
     assert main(["run", "paper_lab", "--time-limit", "3", "-q", "--json", "--out", str(tmp_path / "run")]) == 0
     cap = capsys.readouterr()
     summary = json.loads(cap.out)   # the whole of stdout is the one JSON line
-    assert summary["scenario"] == "paper_lab" and summary["sim_time_s"] == pytest.approx(3.0, abs=0.2)
+    # the run ends with the cycle in which the limit passes (a settle and a 1 s listen)
+    assert summary["scenario"] == "paper_lab" and 3.0 <= summary["sim_time_s"] <= 4.5
     assert "scenario paper_lab" in cap.err and "wrote" in cap.err

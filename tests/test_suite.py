@@ -205,7 +205,8 @@ def test_a_generated_test_scenario_runs_end_to_end(written):
     rows = run_sweep([sc], None, executor=_Inline(), time_limit_s=20.0)   # None: the scenario's own seed
     (r,) = rows
     assert r["seed"] == sc.seed and r["scenario"] == sc.name and r["n_victims"] == len(sc.victims)
-    assert 19.0 <= r["sim_time_s"] <= 22.0 and r["n_listens"] >= 5
+    # (the last cycle may start just before the limit: a 0.6 m step at 0.25 m/s, the settle and a listen)
+    assert 19.0 <= r["sim_time_s"] <= 24.0 and r["n_listens"] >= 5
     # the robot heard sources: detections land near a sounding source's direction
     errs = np.asarray(r["detection_errors_deg"])
     # (a random direction lies a median 54 deg from the nearest of three random sources, less with more)

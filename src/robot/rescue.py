@@ -77,6 +77,7 @@ class RescueBehaviour(Mission):
         self.found_model = found_model if found_model is not None else FoundModel.load()
         self.odometry = Odometry(params, start_pose, gyro, travel)
         self.grid = OccupancyGrid(occupancy, origin=np.asarray(start_pose, float)[:2])
+        self.range_layout = range_layout
         self._scans = RangeScans(self.grid, range_layout)
         self.motion = Motion(drive, clock, self.odometry, motion, fatal=self._check_faults, sensed=self._scans,
                              range_layout=range_layout)
