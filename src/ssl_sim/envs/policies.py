@@ -131,7 +131,7 @@ class MapPlanningPolicy:
         option = choose(self.map.sources, self.pursuits, self.planner, self.grid, self.coverage, self.pose, self.time,
                         timing, self.options, self.target)
         plan = option.plan
-        if option.kind is OptionKind.APPROACH:
+        if option.kind in (OptionKind.APPROACH, OptionKind.TRIANGULATE):   # pursuing that source
             self.target = option.source.id
             self.map.set_state(option.source.id, SourceState.APPROACHING)
         if plan is None:
