@@ -54,7 +54,7 @@ import json
 import math
 from dataclasses import dataclass, field
 from pathlib import Path
-from typing import Iterable, Mapping, Protocol, Sequence
+from typing import Mapping, Protocol, Sequence
 
 import numpy as np
 
@@ -396,8 +396,3 @@ class FoundModel:
         s = ctx.source
         return Assessment(time, s.id, (float(s.position[0]), float(s.position[1])), tuple(map(float, ctx.xy)), f, p,
                           crit)
-
-
-def design_matrix(rows: Iterable[Mapping[str, float]], names: Sequence[str]) -> np.ndarray:
-    """Rows of features (by cue name) -> (n, len(names)) array, a missing cue as 0."""
-    return np.array([[float(r.get(k, 0.0)) for k in names] for r in rows], float).reshape(-1, len(names))

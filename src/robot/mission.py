@@ -26,7 +26,7 @@ class Mission:
         self.drive, self.clock, self.fatal_faults = drive, clock, fatal_faults
         self.state = RescueState.LISTEN
         self.events: list[RescueEvent] = []
-        self.victims: list = []
+        self.victims: list = []          # what was found, in the order declared (positions first: FinishPayload)
         self._faults_seen: tuple[str, ...] = ()
         self._step_events: list[RescueEvent] = []
 

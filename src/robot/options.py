@@ -162,7 +162,7 @@ def choose(sources: Sequence[MapSource], pursuits: Pursuits, planner: Planner, g
     here = heard_per_listen(xy)
     options.append(Option(OptionKind.LISTEN, here / (timing.cycle_s + config.follow_s), None, None,
                           f"{here:.3f} new victim(s) expected per listen here"))
-    plan, how = planner.explore_goal(grid, pose, coverage, found, machines)
+    plan, how = planner.explore_goal(grid, pose, coverage, found, machines, gain)
     if plan is not None:
         there = heard_per_listen(plan.waypoints[-1])
         v = there / (timing.drive_s(plan.length) + config.follow_s)

@@ -228,7 +228,7 @@ class Planner:
         return xy + step * np.array([math.cos(a), math.sin(a)])
 
     def explore_goal(self, grid: OccupancyGrid, pose, coverage: ListeningCoverage, avoid: Sequence[np.ndarray] = (),
-                     machines: Sequence[np.ndarray] = ()) -> tuple[Plan | None, str]:
+                     machines: Sequence[np.ndarray] = (), gain: np.ndarray | None = None) -> tuple[Plan | None, str]:
         """A reachable point ``explore_distance_m`` away where a listen would hear most of the floor not yet
         listened to (``coverage``; ``machines``, the mapped interferers' world x, y, mask the goals near them),
         away from the points ``avoid`` (found victims), or the best frontier goal (module docstring)."""
@@ -236,7 +236,7 @@ class Planner:
         x, y = float(pose[0]), float(pose[1])
         search = self.distances(grid, (x, y))
         best = None
-        gain = coverage.gain(machines)
+        gain = coverage.gain(machines) if gain is None else gain   # the caller's, if it has it (one FFT a cycle)
         occupied = grid.occupied
         r = int(round(1.0 / grid.resolution))   # judge a direction by the floor within 1 m of its goal
         for k in range(cfg.explore_headings):

@@ -100,7 +100,6 @@ class RescueBehaviour(Mission):
         self.contacts: Counter[ContactKind] = Counter()   # every move that ended early, by why (results.json)
         self.recovery = Recovery(self.motion, self.grid, self.coverage, self.contacts, self._emit,
                                  lambda why: self._finish(Decision.STUCK, why), replace(recovery, settle_s=config.settle_s))
-        self.victims: list[FoundVictim] = []      # in the order declared
         self.assessments: list[Assessment] = []   # every P(find) judged, for the fit (tools/fit_found_model.py)
         self.target: int | None = None            # map source id being approached
         self.plan: Plan | None = None
