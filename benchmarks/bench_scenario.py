@@ -27,14 +27,51 @@ import json  # noqa: E402
 import platform  # noqa: E402
 import time  # noqa: E402
 import warnings  # noqa: E402
+from contextlib import contextmanager  # noqa: E402
 
 from _results import add_check_option, finish, load_avg, require_stored  # noqa: E402
+import robot.rescue as rescue_module  # noqa: E402
 from ssl_sim.runner import RescueRun  # noqa: E402
 from ssl_sim.scenario import load_scenario  # noqa: E402
 
-PARTS = ("physics", "acoustics", "localization", "other")
-#: The runner's "other" is the behaviour: its decisions, voice scoring, truth bookkeeping.
-LABELS = {"physics": "physics", "acoustics": "acoustics", "localization": "localization", "other": "behaviour"}
+PARTS = ("physics", "acoustics", "localization", "truth", "other")
+#: The runner's "other" is the behaviour (its voice evidence included); "truth" the runner's own bookkeeping;
+#: physics includes the simulated drive's sensors (ranges, bumper, gyro), which are hardware on the robot.
+LABELS = {"physics": "physics", "acoustics": "acoustics", "localization": "localization", "truth": "truth",
+          "other": "behaviour"}
+#: Inside the behaviour, timed on their own (CPU s): the hearing stage's voice evidence (MPDR beams, VAD, the
+#: voice scan), the microphone health monitor, and the choice of option (paths, exploration, coverage).
+ITEMS = ("voice evidence", "mic health", "options")
+
+
+def _timed(obj, name: str, acc: dict, key: str) -> None:
+    """Accumulate the CPU time (this process) of ``obj.name`` calls into ``acc[key]``."""
+    fn = getattr(obj, name)
+
+    def wrapper(*a, **k):
+        c = time.process_time()
+        try:
+            return fn(*a, **k)
+        finally:
+            acc[key] += time.process_time() - c
+
+    setattr(obj, name, wrapper)
+
+
+@contextmanager
+def _instrument(run: RescueRun):
+    """Time the behaviour's items (``ITEMS``) in ``run`` while inside; yields the accumulator it fills."""
+    acc = dict.fromkeys(ITEMS, 0.0)
+    listener = run.behaviour.listener
+    _timed(listener, "_evidence", acc, "voice evidence")
+    _timed(listener, "_scanned", acc, "voice evidence")
+    _timed(run.mic_health.monitor, "update", acc, "mic health")
+    choose = rescue_module.choose
+    _timed(rescue_module, "choose", acc, "options")
+    try:
+        yield acc
+    finally:
+        rescue_module.choose = choose
 
 
 def fidelity(sc, n_poses: int = 16) -> dict:
@@ -119,13 +156,14 @@ def main(argv: list[str] | None = None) -> int:
             warnings.simplefilter("ignore")
             run = RescueRun(sc, seed=seed)
         setup = time.perf_counter() - t
-        c = time.process_time()
-        r = run.run()
-        cpu = time.process_time() - c
+        with _instrument(run) as items:
+            c = time.process_time()
+            r = run.run()
+            cpu = time.process_time() - c
         w = r["wall_clock_s"]
         rows.append({"seed": seed, "sim_s": r["sim_time_s"], "setup_s": round(setup, 3), "loop_s": w["loop"],
                      **{p: w[p] for p in PARTS}, "found": f"{r['n_found']}/{r['n_victims']}",
-                     "listens": r["n_listens"], "cpu_s": cpu, "cpu_parts": w["cpu"]})
+                     "listens": r["n_listens"], "cpu_s": cpu, "cpu_parts": w["cpu"], "items": items})
     sim = sum(r["sim_s"] for r in rows)
     loop = sum(r["loop_s"] for r in rows)
     per = {p: sum(r[p] for r in rows) / sim for p in PARTS}
@@ -146,6 +184,10 @@ def main(argv: list[str] | None = None) -> int:
     print("CPU s per simulated s by part: " + ", ".join(f"{LABELS[p]} {cpu_per[p]:.4f} "
                                                         f"({100 * cpu_per[p] * sim / cpu_loop:.0f} %)" for p in PARTS)
           + f"; load average {load_avg()[0]:.2f}")
+    cpu_items = {k: sum(r["items"][k] for r in rows) / sim for k in ITEMS}
+    rest = cpu_per["other"] - sum(cpu_items.values())
+    print("behaviour by item, CPU s per simulated s: " + ", ".join(f"{k} {v:.4f}" for k, v in cpu_items.items())
+          + f", the rest (sound map, occupancy, motion loop, odometry, pursuits) {rest:.4f}")
     print(json.dumps({"bench": "scenario", "scenario": sc.name, "seeds": [r["seed"] for r in rows],
                       "sim_s": round(sim, 2), "wall_per_sim_s": round(loop / sim, 4),
                       "realtime_factor": round(sim / loop, 2), "cpu_per_sim_s": round(cpu / sim, 4),
@@ -156,6 +198,7 @@ def main(argv: list[str] | None = None) -> int:
                "wall_x_realtime": round(sim / loop, 2), **{f"{p}_wall_per_sim_s": round(per[p], 4) for p in PARTS},
                **{f"{LABELS[p]}_cpu_s_per_sim_s": round(cpu_per[p], 4) for p in PARTS},
                "behaviour_share_cpu": round(cpu_per["other"] * sim / cpu_loop, 3),
+               **{f"behaviour_{k.replace(' ', '_')}_cpu_s_per_sim_s": round(v, 4) for k, v in cpu_items.items()},
                "victims_found": sum(int(r["found"].split("/")[0]) for r in rows),
                "victims": sum(int(r["found"].split("/")[1]) for r in rows)}
     return finish("scenario", figures, check=args.check, better={"cpu_x_realtime": "higher"})

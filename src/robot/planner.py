@@ -109,11 +109,11 @@ class Plan:
 
 class _Graph:
     """A grid graph kept between plans: the free cells it was built from, the node numbering, the nodes' cells
-    and centres (filled on first use) and the last Dijkstra search on it."""
+    (filled on first use) and the last Dijkstra search on it."""
 
     def __init__(self, key: tuple, free: np.ndarray, g: sparse.csr_matrix, idx: np.ndarray) -> None:
         self.key, self.free, self.g, self.idx = key, free, g, idx
-        self.nodes: tuple[np.ndarray, np.ndarray, np.ndarray] | None = None
+        self.cells: np.ndarray | None = None
         self.search: tuple[np.ndarray, np.ndarray, np.ndarray, int] | None = None
 
 
@@ -159,35 +159,53 @@ class Planner:
              _search=None) -> Plan | None:
         """Shortest path to within ``stop_radius`` (default ``stop_radius_m``) of ``goal_xy``; None if none."""
         r = self.config.stop_radius_m if stop_radius is None else stop_radius
-        dist, pred, idx, start = _search if _search is not None else self.distances(grid, start_xy)
-        cells, nodes, centres = self._nodes_of(grid, idx)
-        near = np.hypot(*(centres - np.asarray(goal_xy, float)[:2]).T) <= max(r, grid.resolution * 0.75)
-        reach = near & np.isfinite(dist[nodes])
+        search = _search if _search is not None else self.distances(grid, start_xy)
+        node = self._goal_node(grid, search, goal_xy, r)
+        return None if node is None else self._path(grid, search, start_xy, node)
+
+    @staticmethod
+    def _goal_node(grid: OccupancyGrid, search, goal_xy, r: float) -> int | None:
+        """The reachable node within ``r`` (at least 0.75 cell) of ``goal_xy`` that is shortest to reach *and*
+        then to the goal (on the line toward it, not the near rim), or None. Only the cells of the goal's box
+        are looked at, in row-major (= node) order, so ties go to the same node as over the whole grid."""
+        dist, _, idx, _ = search
+        goal = np.asarray(goal_xy, float)[:2]
+        rr = max(r, grid.resolution * 0.75)
+        lo, hi = grid.cell(goal - rr), grid.cell(goal + rr)
+        i0, j0 = max(lo[0] - 1, 0), max(lo[1] - 1, 0)
+        sub = idx[i0:max(hi[0] + 2, 0), j0:max(hi[1] + 2, 0)]
+        cells = np.argwhere(sub >= 0)
+        if not cells.size:
+            return None
+        nodes = sub[sub >= 0]
+        cells += (i0, j0)
+        to_goal = np.hypot(*(grid.centre(cells) - goal).T)
+        reach = (to_goal <= rr) & np.isfinite(dist[nodes])
         if not np.any(reach):
             return None
-        # The cell that is shortest to reach *and* then to the goal: on the line toward it, not the near rim.
-        to_goal = np.hypot(*(centres[reach] - np.asarray(goal_xy, float)[:2]).T)
-        k = np.flatnonzero(reach)[int(np.argmin(dist[nodes[reach]] + to_goal))]
-        node = int(nodes[k])
+        return int(nodes[reach][int(np.argmin(dist[nodes[reach]] + to_goal[reach]))])
+
+    def _path(self, grid: OccupancyGrid, search, start_xy, node: int) -> Plan:
+        """The search's path from the robot to ``node``, shortened to line-of-sight waypoints."""
+        dist, pred, idx, start = search
         chain = [node]
         while chain[-1] != start and pred[chain[-1]] >= 0:
             chain.append(int(pred[chain[-1]]))
-        cell_of = cells[np.asarray(chain[::-1])]   # node k is the k-th free cell in row-major order
+        cell_of = self._cells_of(idx)[np.asarray(chain[::-1])]
         path = grid.centre(cell_of)
         path[0] = np.asarray(start_xy, float)[:2]
         return Plan(self._shortcut(grid, path), float(dist[node]))
 
-    def _nodes_of(self, grid: OccupancyGrid, idx: np.ndarray) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
-        """``(cells (k, 2), node of each, centres (k, 2) world m)`` of the graph's nodes (``idx`` >= 0), in node
-        order (``grid_graph`` numbers the free cells in row-major order)."""
+    def _cells_of(self, idx: np.ndarray) -> np.ndarray:
+        """The cells (k, 2) of the graph's nodes in node order (``grid_graph`` numbers the free cells in
+        row-major order), kept with the graph."""
         g = self._graph
-        if g is not None and g.idx is idx and g.nodes is not None:
-            return g.nodes
+        if g is not None and g.idx is idx and g.cells is not None:
+            return g.cells
         cells = np.argwhere(idx >= 0)
-        out = (cells, idx[idx >= 0], grid.centre(cells))
         if g is not None and g.idx is idx:
-            g.nodes = out
-        return out
+            g.cells = cells
+        return cells
 
     @staticmethod
     def _shortcut(grid: OccupancyGrid, path: np.ndarray) -> np.ndarray:
@@ -249,11 +267,13 @@ class Planner:
             # Floor not yet listened to draws; known obstacles there (walls met before) push away.
             score = float(gain[ij]) - 3.0 * float(occupied[box].mean())
             score += float(self._away(goal[None], (x, y), avoid)[0])
-            plan = self.plan(grid, (x, y), goal, stop_radius=0.2, _search=search)
-            if plan is None or plan.length > 2.0 * cfg.explore_distance_m:
+            node = self._goal_node(grid, search, goal, 0.2)   # the path is built for the best goal only
+            if node is None or search[0][node] > 2.0 * cfg.explore_distance_m:
                 continue
             if best is None or score > best[0]:
-                best = (score, plan, math.degrees(a))
+                best = (score, node, math.degrees(a))
+        if best is not None:
+            best = (best[0], self._path(grid, search, (x, y), best[1]), best[2])
         far, far_why = self._frontier_goal(grid, (x, y), gain, coverage.in_area if coverage.config.area else None,
                                            avoid, search)
         # The ring's best against the best unvisited cell anywhere, each worth its score over (1 + path length /

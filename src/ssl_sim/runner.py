@@ -21,8 +21,10 @@ What is measured (all from the simulator's truth, never from the robot's own est
 * **listens**: every localization with its detections against the true directions of all
   sources in the ARRAY frame at the listening pose (each detection is matched to the nearest
   source that was sounding during the block; errors in degrees).
-* **wall clock**: seconds spent in physics, acoustics, localization and the rest; under ``cpu`` the same split in CPU
-  seconds of this process (a machine shared with other work inflates the wall clock, not the CPU time).
+* **wall clock**: seconds spent in physics (MuJoCo and the simulated drive's sensors: what hardware does on the
+  robot), acoustics, localization, the runner's truth bookkeeping (``truth``) and the rest (``other``: the
+  behaviour, with its voice evidence); under ``cpu`` the same split in CPU seconds of this process (a machine
+  shared with other work inflates the wall clock, not the CPU time).
 
 results.json also lists every declaration (``declarations``: reported position, base position, its kind:
 find, false_find, too_far or late; ``cue``: the ``robot.rescue.FindCriterion`` that declared it), the finds counted
@@ -33,6 +35,7 @@ CPU).
 """
 from __future__ import annotations
 
+import functools
 import json
 import math
 import os
@@ -74,21 +77,68 @@ COLLISION_GAP_S = 0.5
 
 
 # ----------------------------------------------------------------------------- instrumentation
+class _Stopwatch:
+    """Wall and CPU seconds (this process) spent inside its ``with`` blocks."""
+
+    __slots__ = ("seconds", "cpu_s", "_t", "_c")
+
+    def __init__(self) -> None:
+        self.seconds = self.cpu_s = 0.0
+
+    def __enter__(self) -> _Stopwatch:
+        self._t, self._c = time.perf_counter(), time.process_time()
+        return self
+
+    def __exit__(self, *exc) -> None:
+        self.seconds += time.perf_counter() - self._t
+        self.cpu_s += time.process_time() - self._c
+
+
+def _bookkeeping(hook):
+    """Time a runner hook (truth, scoring, logging) on the run's ``truth`` stopwatch."""
+    @functools.wraps(hook)
+    def timed(self, *args, **kwargs):
+        with self.truth:
+            return hook(self, *args, **kwargs)
+    return timed
+
+
 class _TracingClock(SimClock):
     """SimClock that times the physics and calls ``on_tick`` after every sleep."""
 
-    def __init__(self, robot: SimRobot, on_tick) -> None:
+    def __init__(self, robot: SimRobot, on_tick, physics: _Stopwatch) -> None:
         super().__init__(robot)
-        self.on_tick = on_tick
-        self.physics_s = 0.0
-        self.physics_cpu_s = 0.0
+        self.on_tick, self.physics = on_tick, physics
 
     def sleep(self, seconds: float) -> None:
-        t, c = time.perf_counter(), time.process_time()
-        super().sleep(seconds)
-        self.physics_s += time.perf_counter() - t
-        self.physics_cpu_s += time.process_time() - c
+        with self.physics:
+            super().sleep(seconds)
         self.on_tick()
+
+
+class _TimedDrive(SimDriveBase):
+    """The simulated drive with its sensor reads and commands timed as physics: on the robot they are the
+    firmware's and the hardware's work, not the behaviour's."""
+
+    def __init__(self, robot: SimRobot, physics: _Stopwatch, **kw) -> None:
+        super().__init__(robot, **kw)
+        self.physics = physics
+
+    def set_twist(self, vx: float, vy: float, omega: float) -> None:
+        with self.physics:
+            super().set_twist(vx, vy, omega)
+
+    def stop(self) -> None:
+        with self.physics:
+            super().stop()
+
+    def odometry(self):
+        with self.physics:
+            return super().odometry()
+
+    def status(self):
+        with self.physics:
+            return super().status()
 
 
 class _RecordingLocalizer:
@@ -156,9 +206,10 @@ class RescueRun:
             raise ValueError(f"localizer.fs = {sc.localizer.fs} Hz differs from the simulated audio "
                              f"({acoustics.config.fs} Hz)")
         self.audio = SimAudioSource(robot, acoustics, on_block=self._on_block, ego_noise=sc.ego_noise)
-        self.drive = SimDriveBase(robot, seed=sc.seed,   # the run's seed draws the gyro's noise and drift
-                                  range_layout=range_layout)
-        self.clock = _TracingClock(robot, self._on_tick)
+        self.physics, self.truth = _Stopwatch(), _Stopwatch()   # the loop's split (results' wall_clock_s)
+        # The run's seed draws the gyro's noise and drift.
+        self.drive = _TimedDrive(robot, self.physics, seed=sc.seed, range_layout=range_layout)
+        self.clock = _TracingClock(robot, self._on_tick, self.physics)
         localizer = Localizer(cube8(), sc.localizer)
         self.localizer = _RecordingLocalizer(localizer, self._on_result)
         # The robot's microphone health monitor, as on the real robot (faults go to rerun and results).
@@ -209,6 +260,7 @@ class RescueRun:
             if self._ticks % 20 == 0:
                 self.logger.trail(t, np.array([row[1:4] for row in self.trajectory[::4]] + [[p.x, p.y, p.z]]))
 
+    @_bookkeeping
     def _on_tick(self) -> None:
         check_interrupt()  # every control tick and audio block (robot.interrupt)
         self._record_pose()
@@ -233,11 +285,13 @@ class RescueRun:
             for f in faults:
                 self.logger.event(t, "health", f"{state}: {f}", "WARN" if f in new else "INFO")
 
+    @_bookkeeping
     def _on_block(self, block, mics) -> None:
         check_interrupt()
         self._last_block = (int(round(block.timestamp * block.sample_rate)), block.samples.shape[1])
         self._record_pose()
 
+    @_bookkeeping
     def _on_result(self, res) -> None:
         t = self.robot.time
         pose = self.robot.pose()
@@ -293,6 +347,7 @@ class RescueRun:
         k = max(0, int(np.searchsorted(times, t + 1e-9)) - 1)
         return self.cum_path[k]
 
+    @_bookkeeping
     def _handle_events(self, events: list[RescueEvent]) -> None:
         sc = self.scenario
         for ev in events:
@@ -396,10 +451,10 @@ class RescueRun:
     def _cpu_split(self) -> dict[str, float | None]:
         """The loop's CPU seconds (this process) split as the wall clock is (``wall_clock_s``)."""
         loop = getattr(self, "_loop_cpu_s", 0.0)
-        phys = self.clock.physics_cpu_s + self.audio.cpu["physics"]
-        acou, loc = self.audio.cpu["acoustics"], self.localizer.cpu_s
+        phys = self.physics.cpu_s + self.audio.cpu["physics"]
+        acou, loc, truth = self.audio.cpu["acoustics"], self.localizer.cpu_s, self.truth.cpu_s
         return {"loop": _r(loop, 3), "physics": _r(phys, 3), "acoustics": _r(acou, 3), "localization": _r(loc, 3),
-                "other": _r(loop - phys - acou - loc, 3)}
+                "truth": _r(truth, 3), "other": _r(loop - phys - acou - loc - truth, 3)}
 
     def _results(self, end_reason: str, loop_s: float) -> dict[str, Any]:
         sc = self.scenario
@@ -435,9 +490,9 @@ class RescueRun:
             return {"n": int(a.size), "mean": _r(a.mean(), 2), "median": _r(np.median(a), 2),
                     "p90": _r(np.percentile(a, 90), 2), "max": _r(a.max(), 2)}
 
-        phys = self.clock.physics_s + self.audio.timing["physics"]
+        phys = self.physics.seconds + self.audio.timing["physics"]
         acou = self.audio.timing["acoustics"]
-        loc = self.localizer.seconds
+        loc, truth = self.localizer.seconds, self.truth.seconds
         sim_t = self.robot.time
         bumps = bumper_recoveries(self.events)
         return {
@@ -467,8 +522,8 @@ class RescueRun:
                        "noise": asdict(sc.noise) if sc.noise is not None else None},
             "provenance": provenance(),
             "wall_clock_s": {"setup": _r(self.setup_s, 3), "loop": _r(loop_s, 3), "physics": _r(phys, 3),
-                             "acoustics": _r(acou, 3), "localization": _r(loc, 3),
-                             "other": _r(loop_s - phys - acou - loc, 3),
+                             "acoustics": _r(acou, 3), "localization": _r(loc, 3), "truth": _r(truth, 3),
+                             "other": _r(loop_s - phys - acou - loc - truth, 3),
                              "per_sim_second": _r(loop_s / max(sim_t, 1e-9), 4), "cpu": self._cpu_split()},
         }
 
@@ -636,5 +691,5 @@ def format_summary(result: dict) -> str:
     w = r["wall_clock_s"]
     lines.append(f"  wall clock {w['loop']:.1f} s ({1 / max(w['per_sim_second'], 1e-9):.1f}x real time): physics "
                  f"{w['physics']:.1f} s, acoustics {w['acoustics']:.1f} s, localization {w['localization']:.1f} s, "
-                 f"other {w['other']:.1f} s")
+                 f"truth bookkeeping {w['truth']:.1f} s, behaviour {w['other']:.1f} s")
     return "\n".join(lines)
