@@ -123,7 +123,7 @@ def choose(sources: Sequence[MapSource], pursuits: Pursuits, planner: Planner, g
     """The most valuable option from ``pose`` (x, y, yaw: world m, rad) at time ``now`` (s)."""
     xy = np.asarray(pose[:2], float)
     keep = planner.config.keep_factor
-    search = planner.distances(grid, xy)
+    search = planner.distances(grid, xy, coverage.config.area)
     machines = [s.position[:2] for s in sources if s.cls is SourceClass.INTERFERER and s.state is not SourceState.FOUND]
     found = [s.position[:2] for s in sources if s.state is SourceState.FOUND]
     options: list[Option] = []

@@ -82,6 +82,11 @@ class PlannerConfig:
     # A frontier goal is unvisited floor at most this far from floor the robot has covered (Yamauchi's frontier:
     # known floor meets unknown). Touch maps walls only where met, so a cell deep in the unknown may lie beyond one.
     frontier_reach_m: float = 0.6
+    # Paths stay within this of the search area (the coverage's ``area``, a floor plan's room): beyond it lies
+    # floor the rescuer did not ask to search, in the simulator the far side of the room's walls, which the
+    # grid shows as free until a range ray or a touch finds the wall. Searching it cost most of the planner's
+    # time (Dijkstra on the whole 20 m window for a 5 m room) and offered paths through the walls.
+    search_margin_m: float = 1.0
 
     #: Fields that no longer exist (robot.config_values.field_values): ignored with a warning.
     RETIRED: ClassVar[dict[str, str]] = {name: "no decision reads it: targets are valued by robot.options" for name in (
@@ -96,6 +101,7 @@ class PlannerConfig:
         need(self, self.explore_distance_m > 0, "explore_distance_m", "> 0 m")
         need(self, self.explore_headings >= 4, "explore_headings", "an integer >= 4")
         need(self, self.frontier_reach_m > 0, "frontier_reach_m", "> 0 m")
+        need(self, self.search_margin_m >= 0, "search_margin_m", ">= 0 m")
 
 
 @dataclass(frozen=True)
@@ -122,15 +128,22 @@ class Planner:
         self.config = config
         self._graph: _Graph | None = None
         self._frontier: np.ndarray | None = None    # the frontier cell being explored toward (world x, y)
+        self._near: tuple[tuple, np.ndarray] | None = None   # the cells near the search area, per grid window
 
     # -- paths ----------------------------------------------------------------------------
-    def distances(self, grid: OccupancyGrid, start_xy) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
+    def distances(self, grid: OccupancyGrid, start_xy, area=None) -> tuple[np.ndarray, np.ndarray, np.ndarray, int]:
         """Dijkstra from the robot: ``(dist per node, predecessors, index grid, start node)`` (read only: the
-        arrays are kept and handed out again while the grid's free cells and the start cell stay the same)."""
+        arrays are kept and handed out again while the grid's free cells and the start cell stay the same).
+        ``area`` (x_min, y_min, x_max, y_max, world m): the search area; the cells farther than
+        ``search_margin_m`` outside it are left out while the robot is within that margin."""
         free = ~grid.blocked
         s = grid.cell(start_xy)
         if not grid.inside(s):
             raise ValueError(f"start_xy: {tuple(start_xy)} is outside the occupancy grid")
+        if area is not None:
+            near = self._near_area(grid, area)
+            if near[s]:
+                free &= near
         if not free[s]:   # touching an obstacle: the robot is where it is, so its own cell is free
             free[s] = True
         graph = self._graph_of(free, grid)
@@ -141,6 +154,18 @@ class Planner:
                 a.flags.writeable = False
             graph.search = (dist, pred, graph.idx, start)
         return graph.search
+
+    def _near_area(self, grid: OccupancyGrid, area) -> np.ndarray:
+        """Cells whose centre lies within ``search_margin_m`` of the rectangle ``area`` (kept per grid window)."""
+        key = (tuple(area), grid.resolution, tuple(grid.centre((0, 0))), grid.n)
+        if self._near is None or self._near[0] != key:
+            m = self.config.search_margin_m
+            x = grid.centre(np.stack([np.arange(grid.n), np.zeros(grid.n, int)], axis=1))[:, 0]
+            y = grid.centre(np.stack([np.zeros(grid.n, int), np.arange(grid.n)], axis=1))[:, 1]
+            ok_x = (x >= area[0] - m) & (x <= area[2] + m)
+            ok_y = (y >= area[1] - m) & (y <= area[3] + m)
+            self._near = (key, np.outer(ok_x, ok_y))
+        return self._near[1]
 
     def _graph_of(self, free: np.ndarray, grid: OccupancyGrid) -> _Graph:
         """The graph of ``free`` on ``grid``'s cells, rebuilt only when a cell's state, the grid's extent or its
@@ -252,7 +277,7 @@ class Planner:
         away from the points ``avoid`` (found victims), or the best frontier goal (module docstring)."""
         cfg = self.config
         x, y = float(pose[0]), float(pose[1])
-        search = self.distances(grid, (x, y))
+        search = self.distances(grid, (x, y), coverage.config.area)
         best = None
         gain = coverage.gain(machines) if gain is None else gain   # the caller's, if it has it (one FFT a cycle)
         occupied = grid.occupied
