@@ -48,7 +48,7 @@ bench: $(STAMP_TEST) system-deps
 
 # Before a release: every speed benchmark again with its default arguments, compared with the stored figures
 # (exit non-zero when one is more than 1.5x worse, or was stored with other arguments). Nothing is written.
-SPEED_BENCH := acoustics env health hearing locate_memory physics scenario srp tracking
+SPEED_BENCH := acoustics env health hearing listen locate_memory physics scenario srp tracking
 bench-check: $(STAMP_TEST)
 	@failed=""; for b in $(SPEED_BENCH); do echo "== bench_$$b --check"; \
 	$(PY) benchmarks/bench_$$b.py --check || failed="$$failed $$b"; done; \
