@@ -299,6 +299,7 @@ class AcousticSimulator:
         for k, src in enumerate(self._sources):
             imgs, first_missing = self._image_set(k, centre)
             positions, reflection = imgs.positions, imgs.reflection
+            l_early = n_pre   # the early part's end (samples): zeros after it
             if cfg.diffraction and len(self._boxes):
                 dpos, dref = self._diffracted(k, imgs, centre)
                 positions, reflection = np.vstack([positions, dpos]), np.vstack([reflection, dref])
@@ -309,7 +310,8 @@ class AcousticSimulator:
             if cfg.late_reverb and self.rt60_bands.max() > 0:
                 tail = self._tail(k, raw)
                 start = int(round(first_missing / cfg.c * cfg.fs)) if np.isfinite(first_missing) else L
-                g = tail_gain(out[k, :, n_pre:], tail.expected_energy, start, cfg.fs)
+                # the early part's energy from its nonzero span (the zeros after it add nothing)
+                g = tail_gain(out[k, :, n_pre:max(l_early, n_pre)], tail.expected_energy, start, cfg.fs)
                 out[k, :, n_pre:] += g * tail.tail
         pr = _PoseRirs(out, tuple(self._sources), cfg.fs, self._responses)
         self._rirs[key] = pr
