@@ -235,7 +235,7 @@ class Localizer:
         max_tau = max(np.abs(tdoa_c).max(), np.abs(tdoa_f).max())
         self._max_lag = int(np.ceil(max_tau * cfg.fs * cfg.upsample)) + 2
         self._coarse = SteeringTable(tdoa_c, cfg.fs, cfg.upsample, self._max_lag, interpolate=False)
-        self._fine = SteeringTable(tdoa_f, cfg.fs, cfg.upsample, self._max_lag)
+        self._fine = SteeringTable(tdoa_f, cfg.fs, cfg.upsample, self._max_lag, by_point=True)  # read by caps
         self._fine_az = np.arctan2(self.fine_grid.directions[:, 1], self.fine_grid.directions[:, 0])
         self._fine_pos = (tdoa_f * cfg.fs * cfg.upsample).astype(np.float32)  # lag of each fine point, per pair
         self._lag_axis = np.arange(-self._max_lag, self._max_lag + 1, dtype=np.float32)

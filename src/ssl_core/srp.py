@@ -37,23 +37,50 @@ class SteeringTable:
     ``1 / (fs * upsample)``.
     """
 
-    def __init__(self, tdoa: np.ndarray, fs: float, upsample: int, max_lag: int, interpolate: bool = True):
+    def __init__(self, tdoa: np.ndarray, fs: float, upsample: int, max_lag: int, interpolate: bool = True,
+                 by_point: bool = False):
+        """``by_point``: store the table point-major, (points, pairs), for tables read a few columns at a time
+        (the fine grid's refinement caps): a point's pairs then share a few cache lines instead of one each,
+        and the same values come out in the same memory order as column picks of the pair-major table, so
+        ``power`` gives the same numbers to the bit."""
         pos = tdoa * (fs * upsample) + max_lag
         if pos.min() < 0 or pos.max() > 2 * max_lag:
             raise ValueError("TDOA table exceeds the GCC lag window; max_lag is too small for this geometry")
         i0 = np.minimum(np.floor(pos).astype(np.intp), 2 * max_lag - 1)
-        self.frac = (pos - i0).astype(np.float32)
+        frac = (pos - i0).astype(np.float32)
+        del pos
         n_pairs = tdoa.shape[0]
-        self.index = (i0 + (np.arange(n_pairs)[:, None] * (2 * max_lag + 1))).astype(np.intp)
+        index = (i0 + (np.arange(n_pairs)[:, None] * (2 * max_lag + 1))).astype(np.intp)
+        del i0
         self.n_pairs = n_pairs
         self.interpolate = interpolate
         if not interpolate:  # nearest lag: half the gathers, for max-pooled coarse searches
-            self.index = self.index + (self.frac >= 0.5)
+            index = index + (frac >= 0.5)
+        self.by_point = by_point
+        if by_point:
+            self._index_t, self._frac_t = np.ascontiguousarray(index.T), np.ascontiguousarray(frac.T)
+        else:
+            self._index, self._frac = index, frac
+
+    @property
+    def index(self) -> np.ndarray:
+        """Flat GCC index (pairs, points) of each point's lower lag (nearest lag without interpolation)."""
+        return np.ascontiguousarray(self._index_t.T) if self.by_point else self._index
+
+    @property
+    def frac(self) -> np.ndarray:
+        """Interpolation weight (pairs, points) of the upper lag, float32."""
+        return np.ascontiguousarray(self._frac_t.T) if self.by_point else self._frac
 
     def power(self, gcc: np.ndarray, columns: np.ndarray | None = None) -> np.ndarray:
         """Mean over pairs of the interpolated GCC at each grid point (or at ``columns`` only)."""
         flat = gcc.reshape(-1)
-        idx, w = (self.index, self.frac) if columns is None else (self.index[:, columns], self.frac[:, columns])
+        if columns is None:
+            idx, w = self.index, self.frac
+        elif self.by_point:   # (pairs, k) views of (k, pairs) rows: the layout column picks of (pairs, points) give
+            idx, w = self._index_t[columns].T, self._frac_t[columns].T
+        else:
+            idx, w = self._index[:, columns], self._frac[:, columns]
         if not self.interpolate:
             return flat[idx].sum(axis=0) / self.n_pairs
         lo = flat[idx]

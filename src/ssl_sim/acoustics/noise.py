@@ -13,7 +13,7 @@ import numpy as np
 from scipy import fft as sfft
 
 from .rir import array_distances, diffuse_mixing
-from .signals import TimeKeyedNoise, _spectrum_fir
+from .signals import TimeKeyedNoise, _piece_together, _spectrum_fir
 
 P_REF = 20e-6  # Pa
 
@@ -104,5 +104,4 @@ class DiffuseNoiseField:
             return np.zeros((mics.shape[0], 0))
         F = self.FRAME
         k0, k1 = n0 // F, (n0 + n - 1) // F
-        seg = np.concatenate([self._frame(k, mics) for k in range(k0, k1 + 1)], axis=1)
-        return seg[:, n0 - k0 * F: n0 - k0 * F + n]
+        return _piece_together(lambda k: self._frame(k, mics), k0, k1, n0 - k0 * F, n, F, mics.shape[0])

@@ -59,9 +59,22 @@ class TimeKeyedNoise:
         k0, k1 = n0 // self.chunk, (n0 + n - 1) // self.chunk if n > 0 else n0 // self.chunk
         if n <= 0:
             return np.zeros((self.channels, 0))
-        parts = np.concatenate([self._chunk(k) for k in range(k0, k1 + 1)], axis=1)
-        start = n0 - k0 * self.chunk
-        return parts[:, start:start + n]
+        return _piece_together(self._chunk, k0, k1, n0 - k0 * self.chunk, n, self.chunk, self.channels)
+
+
+def _piece_together(chunk: Callable[[int], np.ndarray], k0: int, k1: int, start: int, n: int, size: int,
+                    channels: int) -> np.ndarray:
+    """Samples ``start .. start + n - 1`` of chunks ``k0 .. k1`` (each (channels, size), from ``chunk(k)``)
+    laid end to end -> a new (channels, n) array: only the samples asked for are copied (joining whole chunks
+    first copied up to 2 x 8192 samples a channel to keep a quarter-second block)."""
+    out = np.empty((channels, n))
+    pos = 0
+    for k in range(k0, k1 + 1):
+        a = start if k == k0 else 0
+        b = min(size, start + n - (k - k0) * size)
+        out[:, pos:pos + b - a] = chunk(k)[:, a:b]
+        pos += b - a
+    return out
 
 
 class SignalStream(ABC):

@@ -106,17 +106,25 @@ class _PoseRirs:
     """RIRs (n_sources, n_mics, L) at one pose, before the sources' burial filters, and their spectra per
     FFT size with the burial filters applied (zero-phase: one multiplication in the convolution's domain)."""
 
-    def __init__(self, rirs: np.ndarray, sources: Sequence[SoundSource], fs: int) -> None:
+    def __init__(self, rirs: np.ndarray, sources: Sequence[SoundSource], fs: int,
+                 responses: dict[int, list] | None = None) -> None:
         self.rirs, self.sources, self.fs = rirs, sources, fs
         self.spectra: dict[int, np.ndarray] = {}
+        # the burial filters per FFT size, shared by every pose of these sources (they do not depend on the pose)
+        self._responses = {} if responses is None else responses
 
     def spectrum(self, n_fft: int) -> np.ndarray:
         s = self.spectra.get(n_fft)
         if s is None:
             s = sfft.rfft(self.rirs, n_fft, axis=-1)
-            freqs = np.fft.rfftfreq(n_fft, 1.0 / self.fs)
-            for k, src in enumerate(self.sources):
-                resp = src.burial_response(freqs)
+            responses = self._responses.get(n_fft)
+            if responses is None:
+                freqs = np.fft.rfftfreq(n_fft, 1.0 / self.fs)
+                responses = [src.burial_response(freqs) for src in self.sources]
+                if len(self._responses) >= 4:
+                    self._responses.pop(next(iter(self._responses)))
+                self._responses[n_fft] = responses
+            for k, resp in enumerate(responses):
                 if resp is not None:
                     s[k] *= resp
             self.spectra = {n_fft: s}  # one block size at a time is the normal case
@@ -179,6 +187,7 @@ class AcousticSimulator:
         self._first_missing: dict[tuple, float] = {}
         self._tails: dict[tuple[int, bytes], DiffuseTail] = {}
         self._rirs: OrderedDict[bytes, _PoseRirs] = OrderedDict()
+        self._responses: dict[int, list] = {}   # burial filters per FFT size (see _PoseRirs)
         self._sources: list[SoundSource] = []
         if sources is None:
             sources = [victim_source(v, i, seed=cfg.seed, fs=cfg.fs, sound=cfg.victim_sound,
@@ -208,6 +217,7 @@ class AcousticSimulator:
             raise ValueError(f"sources[{i}].signal.fs: {source.signal.fs} Hz differs from the simulation rate {self.config.fs} Hz")
         self._sources.append(source)
         self._rirs.clear()
+        self._responses = {}
         return i
 
     # ------------------------------------------------------------------ impulse responses
@@ -289,6 +299,7 @@ class AcousticSimulator:
         for k, src in enumerate(self._sources):
             imgs, first_missing = self._image_set(k, centre)
             positions, reflection = imgs.positions, imgs.reflection
+            l_early = n_pre   # the early part's end (samples): zeros after it
             if cfg.diffraction and len(self._boxes):
                 dpos, dref = self._diffracted(k, imgs, centre)
                 positions, reflection = np.vstack([positions, dpos]), np.vstack([reflection, dref])
@@ -299,9 +310,10 @@ class AcousticSimulator:
             if cfg.late_reverb and self.rt60_bands.max() > 0:
                 tail = self._tail(k, raw)
                 start = int(round(first_missing / cfg.c * cfg.fs)) if np.isfinite(first_missing) else L
-                g = tail_gain(out[k, :, n_pre:], tail.expected_energy, start, cfg.fs)
+                # the early part's energy from its nonzero span (the zeros after it add nothing)
+                g = tail_gain(out[k, :, n_pre:max(l_early, n_pre)], tail.expected_energy, start, cfg.fs)
                 out[k, :, n_pre:] += g * tail.tail
-        pr = _PoseRirs(out, tuple(self._sources), cfg.fs)
+        pr = _PoseRirs(out, tuple(self._sources), cfg.fs, self._responses)
         self._rirs[key] = pr
         if len(self._rirs) > cfg.rir_cache_size:
             self._rirs.popitem(last=False)
@@ -325,7 +337,11 @@ class AcousticSimulator:
                  include_sources: bool = True, include_ambient: bool = True) -> np.ndarray:
         """Sound pressure (len(channels), n) in Pa at the microphones for absolute samples ``n0 .. n0+n-1``
         (no sensor effects). ``channels`` selects microphones (default all)."""
-        mics = self._check_mics(mic_positions_world)
+        return self._pressure(self._check_mics(mic_positions_world), n0, n, channels, include_sources, include_ambient)
+
+    def _pressure(self, mics: np.ndarray, n0: int, n: int, channels: Sequence[int] | None = None,
+                  include_sources: bool = True, include_ambient: bool = True) -> np.ndarray:
+        """:meth:`pressure` at microphones ``mics`` already checked by ``_check_mics``."""
         ch = np.arange(mics.shape[0]) if channels is None else np.asarray(channels, int)
         n0, n = int(n0), int(n)
         out = np.zeros((ch.size, n))
@@ -343,7 +359,8 @@ class AcousticSimulator:
                 Y += np.multiply(H[k], sfft.rfft(seg, n_fft)[None, :], out=term)
             out += sfft.irfft(Y, n_fft, axis=-1)[:, L - 1: L - 1 + n]
         if include_ambient and self.ambient is not None:
-            out += self.ambient.render(mics, n0, n)[ch]
+            amb = self.ambient.render(mics, n0, n)
+            out += amb if channels is None else amb[ch]
         return out
 
     def _sensor(self, n_mics: int) -> Sensor:
@@ -369,13 +386,13 @@ class AcousticSimulator:
         p = np.zeros((mics.shape[0], n))
         offsets = {float(t[0] - n0) for _, t in timing}
         if sensor.timing_exact() and len(offsets) == 1:
-            p = self.pressure(mics, n0 + int(offsets.pop()), n)
+            p = self._pressure(mics, n0 + int(offsets.pop()), n)
         else:
             h = Sensor.HALF_TAPS
             for chans, times in timing:
                 a = int(np.floor(times.min())) - h - 1
                 b = int(np.ceil(times.max())) + h + 2
-                pch = self.pressure(mics, a, b - a, channels=chans)
+                pch = self._pressure(mics, a, b - a, channels=chans)
                 p[list(chans)] = Sensor.interpolate(pch, a, times)
         if extra_pressure is not None:
             if np.shape(extra_pressure) != p.shape:
