@@ -79,7 +79,7 @@ def test_local_sweep_table(local_rows, tmp_path):
 
 def test_dask_local_cluster_gives_the_same_table(local_rows, scenarios):
     distributed = pytest.importorskip("distributed")
-    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=None) as cl, \
+    with distributed.LocalCluster(n_workers=2, threads_per_worker=1, processes=True, dashboard_address=":0") as cl, \
             distributed.Client(cl) as client:
         dask_rows = run_sweep(scenarios, SEEDS, executor=client, time_limit_s=TIME_LIMIT)
     assert _det(dask_rows) == _det(local_rows)
