@@ -29,23 +29,11 @@ from collections import defaultdict  # noqa: E402
 import gymnasium as gym  # noqa: E402
 import numpy as np  # noqa: E402
 
+from _timing import time_calls  # noqa: E402
 from _results import add_check_option, finish, load_avg, require_stored  # noqa: E402
 from ssl_sim.envs import EnvConfig, SSLRescueEnv  # noqa: E402
 from ssl_sim.envs.fidelity import compare_fidelities, fidelity_summary  # noqa: E402
 
-
-def _timed(obj, name: str, acc: dict, key: str) -> None:
-    """Accumulate the CPU time (this process) of ``obj.name`` calls into ``acc[key]``."""
-    fn = getattr(obj, name)
-
-    def wrapper(*a, **k):
-        t = time.process_time()
-        try:
-            return fn(*a, **k)
-        finally:
-            acc[key] += time.process_time() - t
-
-    setattr(obj, name, wrapper)
 
 
 def single(fidelity: str, steps: int, seed: int = 0) -> dict:
@@ -55,10 +43,10 @@ def single(fidelity: str, steps: int, seed: int = 0) -> dict:
     build = time.perf_counter() - t
     acc: dict = defaultdict(float)
     ep = env._ep
-    _timed(ep.robot, "step", acc, "physics")
-    _timed(env, "_drive_kinematic", acc, "physics")  # fast fidelity: kinematic moves + bumper checks
-    _timed(ep.acoustics, "listen", acc, "acoustics")
-    _timed(env.localizer, "locate", acc, "localization")
+    time_calls(ep.robot, "step", acc, "physics")
+    time_calls(env, "_drive_kinematic", acc, "physics")  # fast fidelity: kinematic moves + bumper checks
+    time_calls(ep.acoustics, "listen", acc, "acoustics")
+    time_calls(env.localizer, "locate", acc, "localization")
     env.action_space.seed(seed)
     actions = [env.action_space.sample() for _ in range(steps)]
     done = 0

@@ -31,6 +31,7 @@ import time  # noqa: E402
 import warnings  # noqa: E402
 from contextlib import contextmanager  # noqa: E402
 
+from _timing import time_calls  # noqa: E402
 from _results import add_check_option, finish, load_avg, require_stored  # noqa: E402
 import robot.rescue as rescue_module  # noqa: E402
 from ssl_sim.runner import RescueRun  # noqa: E402
@@ -46,30 +47,17 @@ LABELS = {"physics": "physics", "acoustics": "acoustics", "localization": "local
 ITEMS = ("voice evidence", "mic health", "options")
 
 
-def _timed(obj, name: str, acc: dict, key: str) -> None:
-    """Accumulate the CPU time (this process) of ``obj.name`` calls into ``acc[key]``."""
-    fn = getattr(obj, name)
-
-    def wrapper(*a, **k):
-        c = time.process_time()
-        try:
-            return fn(*a, **k)
-        finally:
-            acc[key] += time.process_time() - c
-
-    setattr(obj, name, wrapper)
-
 
 @contextmanager
 def _instrument(run: RescueRun):
     """Time the behaviour's items (``ITEMS``) in ``run`` while inside; yields the accumulator it fills."""
     acc = dict.fromkeys(ITEMS, 0.0)
     listener = run.behaviour.listener
-    _timed(listener, "_evidence", acc, "voice evidence")
-    _timed(listener, "_scanned", acc, "voice evidence")
-    _timed(run.mic_health.monitor, "update", acc, "mic health")
+    time_calls(listener, "_evidence", acc, "voice evidence")
+    time_calls(listener, "_scanned", acc, "voice evidence")
+    time_calls(run.mic_health.monitor, "update", acc, "mic health")
     choose = rescue_module.choose
-    _timed(rescue_module, "choose", acc, "options")
+    time_calls(rescue_module, "choose", acc, "options")
     try:
         yield acc
     finally:
