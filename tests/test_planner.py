@@ -186,3 +186,21 @@ def test_shortcut_is_the_greedy_farthest_point_in_sight():
             i = j
         assert np.array_equal(Planner._shortcut(g, path), np.array(want).reshape(-1, 2))
     assert skips > 50   # the clutter leaves lines of sight to shortcut along
+
+
+def test_paths_stay_within_the_margin_of_the_search_area():
+    # A 4 x 3 m search area (a floor plan's room) on an 8 m grid with nothing learned yet: a goal 2 m beyond its
+    # east edge has no path once the area is given (1 m margin), one without it; a goal inside keeps its path,
+    # which never leaves the margin.
+    g = OccupancyGrid(OccupancyConfig(size_m=8.0), origin=(2.0, 1.5))
+    area = (0.0, 0.0, 4.0, 3.0)
+    pl = Planner()
+    outside = (6.0, 1.5)
+    assert pl.plan(g, (1.0, 1.5), outside, _search=pl.distances(g, (1.0, 1.5))) is not None
+    assert pl.plan(g, (1.0, 1.5), outside, _search=pl.distances(g, (1.0, 1.5), area)) is None
+    p = pl.plan(g, (1.0, 1.5), (4.8, 2.9), _search=pl.distances(g, (1.0, 1.5), area))
+    assert p is not None and np.hypot(*(p.waypoints[-1] - [4.8, 2.9])) <= 0.35 + 0.1
+    m = pl.config.search_margin_m + g.resolution
+    assert np.all((p.waypoints >= [area[0] - m, area[1] - m]) & (p.waypoints <= [area[2] + m, area[3] + m]))
+    # A robot outside the margin (e.g. driven there by hand) still plans: the bound is not applied to it.
+    assert pl.plan(g, (5.6, 1.5), (2.0, 1.5), _search=pl.distances(g, (5.6, 1.5), area)) is not None

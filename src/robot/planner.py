@@ -5,8 +5,9 @@ Frames: world/odometry frame (x, y in m). Inputs are the ``SoundMap``'s sources 
 * **goal for a source** (``goal_of``): its estimate, or while its range is open a probe across its bearing
   (which source is worth going to is ``robot.options``'s choice).
 * **path** (``plan``): Dijkstra (``scipy.sparse.csgraph``) on the grid's free cells (unknown counts as
-  free: obstacles are known only where touched or seen by the range sensors), 16-connected, to the nearest cell within ``stop_radius`` of the goal;
-  then shortened to line-of-sight waypoints.
+  free: obstacles are known only where touched or seen by the range sensors), 16-connected, within
+  ``search_margin_m`` of the search area when there is one, to the nearest cell within ``stop_radius`` of the
+  goal; then shortened to line-of-sight waypoints.
 * **exploration** (``explore_goal``): ``explore_headings`` points ``explore_distance_m`` away; the reachable one
   where a listen would hear most of the floor not yet listened to (``robot.coverage``: a mapped machine's
   masking counted there), preferring directions away from found victims (their calls mask fainter ones); or,
