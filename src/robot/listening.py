@@ -221,30 +221,44 @@ class Listener:
         self.audio.flush()
         n = max(1, int(round(seconds * self.audio.sample_rate)))
         t0 = self.clock.now()
-        wheels = self._wheel_speeds()
+        wheels = self.wheel_speeds()
         block = self.audio.read(n)
         # Listening takes the block's duration of clock time. Live and simulated sources let it pass
         # themselves; for one that does not (a file without a clock) let it pass here, standing still.
         lag = n / self.audio.sample_rate - (self.clock.now() - t0)
         if lag > 1e-9:
             self.clock.sleep(lag)
+        if wheels is not None:   # the mean of the readings around the block
+            wheels = 0.5 * (wheels + self.wheel_speeds())
+        return self._hear(block, min_power, motion, wheels, self.clock.now())
+
+    def hear(self, block: AudioBlock, min_power: float, *, time: float, pose: tuple[float, float, float] | None,
+             wheel_speeds=None) -> Listen:
+        """A block captured elsewhere (while driving: ``robot.drive_hearing``) through the same chain as
+        ``listen``: ``time`` is the clock's time (s) at the block's end, ``pose`` the robot's (x m, y m, yaw rad)
+        at its middle (the tracker's motion since the previous listen); ``wheel_speeds`` (3,) rad/s the wheels'
+        mean speed over the block, for the localizer's ego-noise suppression (None: not suppressed)."""
+        w = None if wheel_speeds is None else np.asarray(wheel_speeds, float)
+        return self._hear(block, min_power, self._motion(pose), w, float(time))
+
+    def _hear(self, block: AudioBlock, min_power: float, motion, wheels, time: float) -> Listen:
         if wheels is None:
             result = self.localizer.locate(block.samples)
-        else:  # the drive's noise is suppressed from the wheel speeds (mean of the readings around the block)
-            result = self.localizer.locate(block.samples, wheel_speeds=0.5 * (wheels + self._wheel_speeds()))
+        else:  # the drive's noise is suppressed from the wheel speeds
+            result = self.localizer.locate(block.samples, wheel_speeds=wheels)
         dets: list[Detection] = list(getattr(result, "detections", []) or [])
-        heard = self._evidence(block, dets, self.clock.now(), min_power)
+        heard = self._evidence(block, dets, time, min_power)
         # The strongest source is no voice (or none is heard): a voice may be hiding beside it.
         if not heard[0] or heard[0][0].speech_fraction < self.voice_threshold:
             extra = self._scanned(block, result, dets)
             if extra:
                 # all beams again, together: which beam owns the speech depends on every beam heard with it
-                scanned = self._evidence(block, dets + extra, self.clock.now(), min_power, extra)
+                scanned = self._evidence(block, dets + extra, time, min_power, extra)
                 # kept only if its beam owns the voice it was added for (else a detection beside it does)
                 if len(scanned[0]) > len(heard[0]) and scanned[0][-1].speech_fraction >= self.voice_threshold:
                     heard = scanned
         evidence, n_detections, ignored = heard
-        return Listen(block, self._tracked(evidence, motion), n_detections, ignored)
+        return Listen(block, self._tracked(evidence, motion, time), n_detections, ignored)
 
     def _motion(self, pose) -> tuple[np.ndarray | None, np.ndarray | None]:
         """(rotation, translation) of the array frame since the previous listen, for ``Tracker.update``: the
@@ -275,11 +289,10 @@ class Listener:
         translation = np.array([cy * dx + sy * dy, -sy * dx + cy * dy, 0.0])     # Rz(-yaw) (dx, dy, 0)
         return rotation, translation
 
-    def _tracked(self, evidence: list[ListenEvidence], motion) -> list[ListenEvidence]:
+    def _tracked(self, evidence: list[ListenEvidence], motion, time: float) -> list[ListenEvidence]:
         """The listen's evidence as one tracker update (every listen, also one without detections: tracks coast),
         each piece with its track's id and that track's accumulated voice probability."""
         rotation, translation = motion
-        time = evidence[0].time if evidence else float(self.clock.now())
         self.tracker.update(evidence, time, rotation=rotation, translation=translation,
                             source_range=self.source_range_m)
         ids = self.tracker.detection_ids()
@@ -293,7 +306,7 @@ class Listener:
                                track_voice_probability=self.voice.add(tid, ev.voice_probability)))
         return out
 
-    def _wheel_speeds(self) -> np.ndarray | None:
+    def wheel_speeds(self) -> np.ndarray | None:
         """The wheels' speeds (3,) rad/s from ``drive``, only when the localizer suppresses the drive's noise
         (``Localizer.ego_noise``); None otherwise (the drive is then not asked at all)."""
         if self.drive is None or getattr(self.localizer, "ego_noise", None) is None:

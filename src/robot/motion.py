@@ -200,10 +200,13 @@ class Motion:
         self.update_odometry()
 
     def translate(self, heading: float, distance: float, speed: float | None = None,
-                  arm_bumper_on_release: bool = False, stop_for_ranges: bool = False) -> float:
+                  arm_bumper_on_release: bool = False, stop_for_ranges: bool = False,
+                  pace: Callable[[float], bool] | None = None) -> float:
         """Move ``distance`` m along ``heading`` (rad, robot frame at the start) keeping the yaw; returns the
         distance made (odometry). ``arm_bumper_on_release``: a bumper pressed at the start only counts once
-        released (backing away from a contact). ``stop_for_ranges``: stop before a range return in the way."""
+        released (backing away from a contact). ``stop_for_ranges``: stop before a range return in the way.
+        ``pace(seconds)``: waits one control tick instead of the clock (reading that much audio: a drive that
+        listens, ``robot.drive_hearing``); it returns False to end the move there (the distance made so far)."""
         cfg = self.config
         speed = cfg.drive_speed if speed is None else speed
         x0, y0, yaw0 = self._tick_odometry()
@@ -224,13 +227,20 @@ class Motion:
                 v = min(speed, max(0.05, 2.0 * remaining))
                 rel = heading - (yaw - yaw0)  # hold the start yaw: the direction in the body frame turns back
                 self._drive(v * math.cos(rel), v * math.sin(rel), -2.0 * (yaw - yaw0))
-                self.clock.sleep(cfg.control_dt)
+                going = True
+                if pace is None:
+                    self.clock.sleep(cfg.control_dt)
+                else:
+                    going = pace(cfg.control_dt)
                 armed = armed or not self.status().bumper
                 self._check(armed, world_heading, (rel, remaining) if stop_for_ranges else None)
                 x, y, _ = self._tick_odometry()
                 if watch.stalled(self.clock.now(), (x - x0) * ux + (y - y0) * uy, v):
                     self.stop()
                     raise Blocked(ContactKind.STALL, DriveStatus(stalled=True), world_heading)
+                if not going:
+                    done = (x - x0) * ux + (y - y0) * uy
+                    break
         finally:
             self.stop()
         self.update_odometry()

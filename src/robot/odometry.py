@@ -59,6 +59,20 @@ class Pose2D(NamedTuple):
     yaw: float
 
 
+def pose_at(trajectory, time: float) -> Pose2D:
+    """Pose at ``time`` (s) linearly interpolated in a trajectory (k, 4) of rows ``(time, x, y, yaw)`` with
+    increasing times (yaw unwrapped first; held at the ends)."""
+    tr = np.asarray(trajectory, float)
+    if tr.ndim != 2 or tr.shape[1] != 4 or len(tr) < 1 or not np.all(np.isfinite(tr)):
+        raise ValueError(f"trajectory: expected finite (k >= 1, 4) rows (time, x, y, yaw), got shape {tr.shape}")
+    if np.any(np.diff(tr[:, 0]) <= 0):
+        raise ValueError("trajectory: times must increase")
+    t = float(time)
+    yaw = np.unwrap(tr[:, 3])
+    return Pose2D(float(np.interp(t, tr[:, 0], tr[:, 1])), float(np.interp(t, tr[:, 0], tr[:, 2])),
+                  float(np.interp(t, tr[:, 0], yaw)))
+
+
 @dataclass(frozen=True)
 class GyroFusionConfig:
     """How the gyro's yaw rate is fused (see the module docstring). Rates in rad/s."""

@@ -28,6 +28,8 @@ class RescueConfig:
     p_find: float = 0.45                   # declare a find at P(victim within 0.5 m of the report) >= this (chosen
     #                                        on the train curve: experiments/found_model/p_find_curve.json)
     step_m: float = 0.6                    # longest move between two listens (m)
+    listen_while_driving: bool = False     # hear listen_s windows while driving too, when the localizer suppresses
+    #                                        the drive's noise (robot.drive_hearing)
     max_victims: int | None = None         # stop after finding this many (None: keep searching)
     fatal_faults: tuple[str, ...] = ("encoder_error",)  # drive faults that end the mission
 

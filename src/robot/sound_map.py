@@ -49,7 +49,7 @@ import numpy as np
 
 from robot.config_values import need
 from robot.mount import ArrayMount
-from robot.odometry import Pose2D
+from robot.odometry import Pose2D, pose_at
 
 __all__ = ["BearingEvidence", "DISTINCT_POSES_M", "SoundMapConfig", "SourceClass", "SourceState", "Listen",
            "MapSource", "SoundMap", "pose_at", "triangulate"]
@@ -64,20 +64,6 @@ class BearingEvidence(Protocol):
     voice_probability: float       # 0..1
     level_db: float                # beam level toward it (dB re full-scale sine)
     activity: float                # 0..1
-
-
-def pose_at(trajectory, time: float) -> Pose2D:
-    """Pose at ``time`` (s) linearly interpolated in a trajectory (k, 4) of rows ``(time, x, y, yaw)`` with
-    increasing times (yaw unwrapped first; held at the ends)."""
-    tr = np.asarray(trajectory, float)
-    if tr.ndim != 2 or tr.shape[1] != 4 or len(tr) < 1 or not np.all(np.isfinite(tr)):
-        raise ValueError(f"trajectory: expected finite (k >= 1, 4) rows (time, x, y, yaw), got shape {tr.shape}")
-    if np.any(np.diff(tr[:, 0]) <= 0):
-        raise ValueError("trajectory: times must increase")
-    t = float(time)
-    yaw = np.unwrap(tr[:, 3])
-    return Pose2D(float(np.interp(t, tr[:, 0], tr[:, 1])), float(np.interp(t, tr[:, 0], tr[:, 2])),
-                  float(np.interp(t, tr[:, 0], yaw)))
 
 
 class SourceClass(str, Enum):

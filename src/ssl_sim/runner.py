@@ -62,6 +62,7 @@ from ssl_core.health import HealthConfig, MicHealth
 from ssl_core.localizer import Localizer
 from ssl_sim.acoustics import AcousticSimulator
 from ssl_sim.backends import SimAudioSource, array_frame_directions
+from ssl_sim.calibration import ego_noise_suppressor
 from robot.interrupt import check_interrupt
 from ssl_sim.physics import SimClock, SimDriveBase, SimRobot
 from ssl_sim.provenance import provenance
@@ -153,12 +154,16 @@ class _RecordingLocalizer:
         self.seconds = 0.0
         self.cpu_s = 0.0
 
-    def locate(self, samples):
+    @property
+    def ego_noise(self):
+        return self._loc.ego_noise
+
+    def locate(self, samples, **kw):
         t, c = time.perf_counter(), time.process_time()
-        res = self._loc.locate(samples)
+        res = self._loc.locate(samples, **kw)
         self.seconds += time.perf_counter() - t
         self.cpu_s += time.process_time() - c
-        self.on_result(res)
+        self.on_result(res, samples.shape[-1])
         return res
 
     def peak_in_sector(self, result, azimuth, half_width, recording=None):
@@ -210,7 +215,12 @@ class RescueRun:
         # The run's seed draws the gyro's noise and drift.
         self.drive = _TimedDrive(robot, self.physics, seed=sc.seed, range_layout=range_layout)
         self.clock = _TracingClock(robot, self._on_tick, self.physics)
-        localizer = Localizer(cube8(), sc.localizer)
+        # The drive's noise is suppressed by a calibration of the simulated drive (ssl_sim.calibration), as the
+        # robot's own calibration file does on hardware; a silent drive needs none.
+        ego = None
+        if sc.ego_noise is not None and sc.behaviour.listen_while_driving:
+            ego = ego_noise_suppressor(sc.ego_noise, sc.localizer.fs, robot.config.array_height)
+        localizer = Localizer(cube8(), sc.localizer, ego_noise=ego)
         self.localizer = _RecordingLocalizer(localizer, self._on_result)
         # The robot's microphone health monitor, as on the real robot (faults go to rerun and results).
         self.mic_health = MonitoredAudio(self.audio, MicHealth(cube8(), HealthConfig(fs=sc.localizer.fs)),
@@ -237,7 +247,7 @@ class RescueRun:
         self.declarations: list[dict] = []     # every declaration with its judgement
         self._find_legs: list[tuple[int, tuple[float, float], float]] = []   # victim, base xy, path (m), in order
         self.events: list[RescueEvent] = []
-        self._last_block: tuple[int, int] | None = None
+        self._blocks: list[tuple[int, int, list]] = []   # recent reads: first sample, length, array poses
         self._ticks = 0
         self.failure: dict[str, str] | None = None   # what failed, when a part of the robot ended the run
         self.setup_s = time.perf_counter() - t0
@@ -287,22 +297,36 @@ class RescueRun:
 
     @_bookkeeping
     def _on_block(self, block, mics) -> None:
-        check_interrupt()
-        self._last_block = (int(round(block.timestamp * block.sample_rate)), block.samples.shape[1])
-        self._record_pose()
+        n0 = int(round(block.timestamp * block.sample_rate))
+        self._blocks.append((n0, block.samples.shape[1], self.audio.last_array_poses))
+        del self._blocks[:-64]    # a heard window spans at most a second of 50 ms reads
+        self._on_tick()           # a read advances the world as a clock tick does: pose, contacts
+
+    def _window(self, n_samples: int) -> tuple[tuple[np.ndarray, np.ndarray], tuple[int, int] | None]:
+        """The array's pose (origin, rotation; world) at the middle of the window of the last ``n_samples``
+        samples read, and that window (first sample, length): a window heard while driving is many reads."""
+        if not self._blocks:
+            return self.robot.array_pose(), None
+        n0, n, _ = self._blocks[-1]
+        start = n0 + n - int(n_samples)
+        middle = start + 0.5 * n_samples
+        for b0, bn, poses in reversed(self._blocks):
+            if b0 <= middle < b0 + bn or b0 <= start:
+                k = int(round(min(max((middle - b0) / bn, 0.0), 1.0) * (len(poses) - 1))) if poses else 0
+                return (poses[k] if poses else self.robot.array_pose()), (start, int(n_samples))
+        return self.robot.array_pose(), (start, int(n_samples))
 
     @_bookkeeping
-    def _on_result(self, res) -> None:
+    def _on_result(self, res, n_samples: int) -> None:
         t = self.robot.time
         pose = self.robot.pose()
         pos = np.array([s.position for s in self.sources]).reshape(-1, 3)
-        # Truth at the middle of the block just heard (a parked robot creeps slightly).
-        poses = self.audio.last_array_poses
-        origin, rot = poses[len(poses) // 2] if poses else self.robot.array_pose()
+        # Truth at the middle of the window just heard (a parked robot creeps slightly; a driving one moves).
+        (origin, rot), window = self._window(n_samples)
         az, el, dist = array_frame_directions(origin, rot, pos)
         active = np.ones(len(self.sources))
-        if self._last_block is not None:
-            n0, n = self._last_block
+        if window is not None:
+            n0, n = window
             for k, s in enumerate(self.sources):
                 x = s.signal.render(n0, n)
                 fr = x[: n // 160 * 160].reshape(-1, 160)
