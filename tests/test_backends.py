@@ -78,6 +78,25 @@ def test_moving_robot_is_rendered_per_chunk_and_standing_robot_in_one_go():
     assert hal.robot.pose().x - x0 > 0.05
 
 
+def test_a_driving_array_is_rendered_at_a_held_pose_within_its_tolerance():
+    hal = _hal(_world(), pose_hold_m=0.025)
+    rendered, true = [], []
+    hal.audio.on_block = lambda block, mics: rendered.append(mics[0].copy())
+    hal.drive.set_twist(0.25, 0.0, 0.0)
+    hal.audio.read(4000)   # up to speed
+    rendered.clear()
+    for _ in range(30):    # the control loop's 50 ms reads
+        before = hal.robot.mic_positions()
+        hal.audio.read(800)
+        true.append(0.5 * (before + hal.robot.mic_positions()))
+    off = [float(np.max(np.linalg.norm(r - t, axis=-1))) for r, t in zip(rendered, true)]
+    assert max(off) <= 0.025 + 1e-9                     # never farther than the tolerance from the truth
+    changes = sum(not np.array_equal(a, b) for a, b in zip(rendered, rendered[1:]))
+    assert 5 <= changes <= 15                           # 0.0125 m a read: a new pose every second or third read
+    with pytest.raises(ValueError, match="pose_hold_m"):
+        _hal(_world(), pose_hold_m=-0.01)
+
+
 def test_scenario_builds_a_hal_the_behaviour_can_use():
     from ssl_sim.scenario import load_scenario
 

@@ -95,6 +95,7 @@ class EgoNoise:
         self._phase = self._phase0.copy()
         self._next_n0: int | None = None
         self._hist = np.zeros((3, 0))
+        self._rirs: tuple[bytes, list] | None = None   # the last pose's motor RIRs
         h = cfg.harmonics
         # Tone amplitude so that the harmonics together carry tonal_share of the unit power.
         self._tone_amp = np.sqrt(2 * cfg.tonal_share / float(np.sum(np.square(h))))
@@ -143,15 +144,21 @@ class EgoNoise:
             return np.zeros((mics.shape[0], n))
         out = np.zeros((mics.shape[0], n))
         hist = self._hist if contiguous else np.zeros((3, 0))
-        rirs = []
-        for pos in np.asarray(motor_positions_world, float):
-            imgs = sim.scene.image_sources(pos, mics.mean(axis=0), cfg.ism_order, c)
-            if imgs.positions.shape[0] == 0:  # no path from this motor (hidden by an obstacle): not heard
-                rirs.append(None)
-                continue
-            d_max = float(np.max(np.linalg.norm(imgs.positions[:, None] - mics[None], axis=-1)))
-            L = n_pre + int(np.ceil(d_max / c * fs)) + FRAC_HALF_TAPS + 1
-            rirs.append(early_rir(imgs.positions, imgs.reflection, mics, fs, c, n_pre, L))
+        motors = np.asarray(motor_positions_world, float)
+        key = mics.tobytes() + motors.tobytes()
+        if self._rirs is not None and self._rirs[0] == key:   # the same pose again (a held pose: SimAudioSource)
+            rirs = self._rirs[1]
+        else:
+            rirs = []
+            for pos in motors:
+                imgs = sim.scene.image_sources(pos, mics.mean(axis=0), cfg.ism_order, c)
+                if imgs.positions.shape[0] == 0:  # no path from this motor (hidden by an obstacle): not heard
+                    rirs.append(None)
+                    continue
+                d_max = float(np.max(np.linalg.norm(imgs.positions[:, None] - mics[None], axis=-1)))
+                L = n_pre + int(np.ceil(d_max / c * fs)) + FRAC_HALF_TAPS + 1
+                rirs.append(early_rir(imgs.positions, imgs.reflection, mics, fs, c, n_pre, L))
+            self._rirs = (key, rirs)
         # History kept before the block: the longest RIR (its causal part plus the pre-emission part).
         keep = max((h.shape[1] for h in rirs if h is not None), default=1)
         full = np.concatenate([np.zeros((3, max(0, keep - hist.shape[1]))), hist[:, -keep:], src], axis=1)
