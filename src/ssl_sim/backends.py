@@ -52,7 +52,8 @@ class SimAudioSource(AudioSource):
     ``pose_hold_m``: while the array moves, a chunk is rendered at the pose the previous chunk was rendered at as
     long as no microphone is farther than this from it (m; 0: every chunk at its own pose). The room's response
     is the costly part of a chunk (about half of a 50 ms read while driving); held for 2.5 cm it is computed for
-    every third 50 ms read at 0.25 m/s, and a source 1 m away is rendered at most 1.4 deg off its bearing.
+    every third 50 ms read at 0.25 m/s, and a source 1 m away is rendered at most 1.4 deg off its bearing; the
+    sources' sound at a held pose is rendered 0.2 s ahead (``AcousticSimulator.render_ahead``).
     """
 
     def __init__(self, robot: SimRobot, acoustics: AcousticSimulator, chunk_s: float = 0.05,
@@ -67,6 +68,8 @@ class SimAudioSource(AudioSource):
         if not (np.isfinite(pose_hold_m) and pose_hold_m >= 0):
             raise ValueError(f"pose_hold_m: expected a distance >= 0 m, got {pose_hold_m}")
         self.pose_hold_m = float(pose_hold_m)
+        if pose_hold_m > 0:   # a held pose lasts 2-3 reads of 50 ms at 0.25 m/s: its sound rendered once for 0.2 s
+            acoustics.render_ahead = max(acoustics.render_ahead, int(round(4 * chunk_s * acoustics.config.fs)))
         # the microphone positions a moving chunk was last rendered at, with the block's (mics, motors) for the
         # ego noise
         self._held: tuple[np.ndarray, tuple | None] | None = None

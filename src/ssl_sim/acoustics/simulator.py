@@ -188,6 +188,11 @@ class AcousticSimulator:
         self._tails: dict[tuple[int, bytes], DiffuseTail] = {}
         self._rirs: OrderedDict[bytes, _PoseRirs] = OrderedDict()
         self._responses: dict[int, list] = {}   # burial filters per FFT size (see _PoseRirs)
+        #: Samples of the sources' sound rendered beyond a request at the same pose (0: none): an array held at
+        #: one pose over successive short reads (``SimAudioSource.pose_hold_m``) convolves its response once
+        #: for all of them (the FFT's length is the response's, ~0.8 s, whatever the read's).
+        self.render_ahead = 0
+        self._ahead: tuple[tuple, int, np.ndarray] | None = None   # (pose and channels, first sample, pressure)
         self._sources: list[SoundSource] = []
         if sources is None:
             sources = [victim_source(v, i, seed=cfg.seed, fs=cfg.fs, sound=cfg.victim_sound,
@@ -345,23 +350,34 @@ class AcousticSimulator:
         ch = np.arange(mics.shape[0]) if channels is None else np.asarray(channels, int)
         n0, n = int(n0), int(n)
         out = np.zeros((ch.size, n))
-        if include_sources and self._sources:
-            pr = self._pose_rirs(mics)
-            L = self.rir_length
-            n_fft = sfft.next_fast_len(n + L - 1)
-            H = pr.spectrum(n_fft)  # (S, C, F)
-            if channels is not None:   # a subset: copied (2.8 MB for three sources at 1 s: not for all channels)
-                H = H[:, ch, :]
-            Y = np.zeros((ch.size, n_fft // 2 + 1), complex)
-            term = np.empty_like(Y)
-            for k, src in enumerate(self._sources):
-                seg = src.signal.render(n0 + self.N_PRE - L + 1, n + L - 1) * src.pressure_at_1m
-                Y += np.multiply(H[k], sfft.rfft(seg, n_fft)[None, :], out=term)
-            out += sfft.irfft(Y, n_fft, axis=-1)[:, L - 1: L - 1 + n]
+        if include_sources and self._sources and self.render_ahead > 0:
+            key = (mics.tobytes(), ch.tobytes())
+            a = self._ahead
+            if a is None or a[0] != key or not (a[1] <= n0 and n0 + n <= a[1] + a[2].shape[1]):
+                a = self._ahead = (key, n0, self._sources_pressure(mics, ch, channels, n0,
+                                                                   max(n, int(self.render_ahead))))
+            out += a[2][:, n0 - a[1]: n0 - a[1] + n]
+        elif include_sources and self._sources:
+            out += self._sources_pressure(mics, ch, channels, n0, n)
         if include_ambient and self.ambient is not None:
             amb = self.ambient.render(mics, n0, n)
             out += amb if channels is None else amb[ch]
         return out
+
+    def _sources_pressure(self, mics: np.ndarray, ch: np.ndarray, channels, n0: int, n: int) -> np.ndarray:
+        """The sources' sound (len(ch), n) Pa at ``mics`` through the pose's responses, samples ``n0 ..``."""
+        pr = self._pose_rirs(mics)
+        L = self.rir_length
+        n_fft = sfft.next_fast_len(n + L - 1)
+        H = pr.spectrum(n_fft)  # (S, C, F)
+        if channels is not None:   # a subset: copied (2.8 MB for three sources at 1 s: not for all channels)
+            H = H[:, ch, :]
+        Y = np.zeros((ch.size, n_fft // 2 + 1), complex)
+        term = np.empty_like(Y)
+        for k, src in enumerate(self._sources):
+            seg = src.signal.render(n0 + self.N_PRE - L + 1, n + L - 1) * src.pressure_at_1m
+            Y += np.multiply(H[k], sfft.rfft(seg, n_fft)[None, :], out=term)
+        return sfft.irfft(Y, n_fft, axis=-1)[:, L - 1: L - 1 + n]
 
     def _sensor(self, n_mics: int) -> Sensor:
         s = self._sensors.get(n_mics)
