@@ -71,7 +71,7 @@ def test_every_window_is_heard_whole_at_the_pose_of_its_middle():
     hearing.start()
     going = [hearing.pace(0.05) for _ in range(50)]       # 2.5 s of control ticks
     assert len(ear.heard) == 2 and hearing.windows == 2
-    assert going.index(False) == 39                         # the handler ended the move at the second window
+    assert going.index(False) == 39 and hearing.stopped     # the handler ended the move at the second window
     for k, h in enumerate(ear.heard):
         x = h["block"].samples
         assert x.shape == (8, FS)                           # a whole window ...

@@ -227,3 +227,36 @@ def test_a_replay_with_other_options_stops_at_the_first_difference(recording, tm
     code, _ = run(["--dry-run", "--replay", str(mission), "--max-time", "10", "--set", "listen_s=0.5"])
     err = capsys.readouterr().err
     assert code == 1 and "MissionDiverged" in err and "the behaviour read 8000 samples" in err
+
+
+def test_ego_noise_template_reaches_the_localizer_and_a_bad_one_is_named(recording, tmp_path, monkeypatch, capsys):
+    from ssl_core.ego_noise import EgoNoiseTemplate
+    from ssl_core.localizer import Localizer
+
+    freqs = np.linspace(0, FS / 2, 257)
+    good = tmp_path / "ego.npz"
+    EgoNoiseTemplate(FS, freqs, np.array([1.0, 2.0]), np.ones((2, 257)), np.array([-60.0, -55.0]), 8).save(good)
+    built = []
+    real_init = Localizer.__init__
+
+    def spy(self, *a, **kw):
+        real_init(self, *a, **kw)
+        built.append(self.ego_noise)
+
+    monkeypatch.setattr(Localizer, "__init__", spy)
+    code, _ = run(["--dry-run", "--replay", str(recording), "--max-time", "2", "--ego-noise", str(good)])
+    assert code == 0
+    sup = built[-1]
+    assert sup is not None and sup.template.fs == FS
+    # the motors sit below the array by the mount's height less their axle height (robot.ego_calibration)
+    assert np.allclose([m[2] for m in sup.config.motor_positions], 0.05 - 0.30)
+    assert run(["--dry-run", "--replay", str(recording), "--ego-noise", str(tmp_path / "none.npz")])[0] == 2
+    assert "--ego-noise" in capsys.readouterr().err
+    slow = tmp_path / "ego8k.npz"
+    EgoNoiseTemplate(8000, freqs / 2, np.array([1.0, 2.0]), np.ones((2, 257)), np.array([-60.0, -55.0]), 8).save(slow)
+    assert run(["--dry-run", "--replay", str(recording), "--ego-noise", str(slow)])[0] == 2
+    assert "recorded at 8000 Hz" in capsys.readouterr().err
+    four = tmp_path / "ego4.npz"
+    EgoNoiseTemplate(FS, freqs, np.array([1.0, 2.0]), np.ones((2, 257)), np.array([-60.0, -55.0]), 4).save(four)
+    assert run(["--dry-run", "--replay", str(recording), "--ego-noise", str(four)])[0] == 2
+    assert "4 microphones" in capsys.readouterr().err

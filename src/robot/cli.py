@@ -62,6 +62,10 @@ def _parser() -> argparse.ArgumentParser:
     p.add_argument("--fs", type=int, default=16000, help="sample rate of live capture (Hz) (default: %(default)s)")
     p.add_argument("--array", default="cube8", help="array preset or .toml/.json geometry (default: %(default)s)")
     p.add_argument("--sources", type=int, default=3, help="sources localized per listen (default: %(default)s)")
+    p.add_argument("--ego-noise", metavar="FILE.npz", default=None,
+                   help="the drive's noise template (written by ssl-robot calibrate-ego-noise): the localizer "
+                        "suppresses the motors while the wheels turn, so the behaviour can hear while driving "
+                        "(--set listen_while_driving=true)")
     p.add_argument("--rel-threshold", type=float, default=0.15,
                    help="report sources down to this fraction of the strongest's SRP power, so that a weaker "
                         "voice can be preferred over a louder noise (default: %(default)s)")
@@ -124,6 +128,25 @@ def _rescue_config(args) -> tuple[RescueConfig, dict]:
             msg = in_section(str(exc), cls, sec)
             raise ValueError(msg if msg.startswith("--set") else f"--set {msg}") from None
     return config, sections
+
+
+def _ego_noise(args, geometry, fs: int, mount):
+    """The localizer's ego-noise suppression from ``--ego-noise`` (None without it)."""
+    if args.ego_noise is None:
+        return None
+    from robot.ego_calibration import MotorMount, array_geometry_check
+    from robot.mount import ArrayMount
+    from ssl_core.ego_noise import EgoNoiseSuppressor, EgoNoiseTemplate
+
+    try:
+        template = EgoNoiseTemplate.load(args.ego_noise)
+        array_geometry_check(geometry, template)
+    except ValueError as exc:
+        raise ValueError(f"--ego-noise: {exc}") from None
+    if template.fs != fs:
+        raise ValueError(f"--ego-noise: {args.ego_noise} was recorded at {template.fs} Hz, the audio delivers {fs} Hz")
+    motors = MotorMount(array=mount if mount is not None else ArrayMount())
+    return EgoNoiseSuppressor(geometry, motors.suppression_config(), template)
 
 
 def _check_options(args) -> None:
@@ -317,7 +340,8 @@ def main(argv: list[str] | None = None, out=None) -> int:
                 sys.argv[1:] if argv is None else argv)})
             clock, drive, audio = recorder.clock(clock), recorder.drive(drive), recorder.audio(audio)
         localizer = Localizer(geometry, LocalizerConfig(fs=audio.sample_rate, n_sources=args.sources,
-                                                        rel_threshold=args.rel_threshold))
+                                                        rel_threshold=args.rel_threshold),
+                              ego_noise=_ego_noise(args, geometry, audio.sample_rate, sections.get("mount")))
         audio = _monitored(args, audio, geometry, localizer, out)
     except (ValueError, FileNotFoundError, ImportError, OSError, RuntimeError) as exc:
         for dev in (drive, audio, recorder):

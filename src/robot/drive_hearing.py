@@ -41,6 +41,7 @@ class DriveHearing:
         self.listener, self.clock, self.pose = listener, clock, pose
         self.window_s, self.min_power, self.on_window = float(window_s), float(min_power), on_window
         self.windows = 0                     # windows heard while driving (all moves)
+        self.stopped = False                 # the last window heard ended the move (``on_window`` said so)
         self._chunks: list[AudioBlock] = []
         self._rows: list[tuple[float, float, float, float]] = []
         self._wheels: list[np.ndarray] = []
@@ -49,6 +50,7 @@ class DriveHearing:
         """A move begins: audio captured before it is not part of its windows."""
         self.listener.audio.flush()
         self._chunks, self._rows, self._wheels = [], [], []
+        self.stopped = False
 
     def pace(self, seconds: float) -> bool:
         """Read ``seconds`` of audio (the control tick's wait); False when the window it completed says stop."""
@@ -72,7 +74,8 @@ class DriveHearing:
         trajectory = np.array(self._rows)
         self._chunks, self._rows, self._wheels = [], [], []
         self.windows += 1
-        return bool(self.on_window(listen, trajectory))
+        self.stopped = not self.on_window(listen, trajectory)
+        return not self.stopped
 
     def _row(self) -> None:
         t = float(self.clock.now())

@@ -113,6 +113,7 @@ class RescueBehaviour(Mission):
         self._spot: list[ListenEvidence] = []     # every bearing heard from the current spot (robot frame) ...
         self._spot_at: np.ndarray | None = None   # ... and that spot's pose
         self._started = False
+        self._doing: tuple[OptionKind, int | None] | None = None   # the option the current move serves
 
     @property
     def pose(self) -> np.ndarray:
@@ -132,8 +133,11 @@ class RescueBehaviour(Mission):
                 return
         if not self._keep_on_map():
             return
-        self._act(choose(self.map.sources, self.pursuits, self.planner, self.grid, self.coverage, self.pose,
-                         self.clock.now(), self.timing, self.options, self.target))
+        self._act(self._choose())
+
+    def _choose(self) -> Option:
+        return choose(self.map.sources, self.pursuits, self.planner, self.grid, self.coverage, self.pose,
+                      self.clock.now(), self.timing, self.options, self.target)
 
     def _ready(self) -> bool:
         """Start odometry once; move the map's window; handle faults and a contact left from the last move."""
@@ -186,12 +190,14 @@ class RescueBehaviour(Mission):
 
     def _heard_driving(self, res: Listen, trajectory: np.ndarray) -> bool:
         """A window heard while driving (``robot.drive_hearing``) into the map, at the pose of its middle, and
-        the coverage; the drive goes on."""
+        the coverage. The drive goes on while the option it serves is still the one worth most (the current
+        target keeps its ``keep_factor``); else it ends here and the next cycle listens standing and decides."""
         pose = np.array(pose_at(trajectory, 0.5 * (trajectory[0, 0] + trajectory[-1, 0])))
         assoc = self.map.update(res.evidence, pose, float(trajectory[-1, 0]))
         self.coverage.listened(pose[:2], self._machines())
         self._report(res, assoc, pose, "while driving: ")
-        return True
+        o = self._choose()
+        return (o.kind, None if o.source is None else o.source.id) == self._doing
 
     def _report(self, res: Listen, assoc, pose: np.ndarray, prefix: str = "") -> dict[int, ListenEvidence]:
         """The listen's event; returns its evidence by unfound source id."""
@@ -262,6 +268,7 @@ class RescueBehaviour(Mission):
     # -- acting -----------------------------------------------------------------------
     def _act(self, o: Option) -> None:
         s = o.source
+        self._doing = (o.kind, None if s is None else s.id)
         if o.kind is OptionKind.APPROACH:
             self._set_target(s, o.plan)
             az, el = self._bearing_to(s.position)
@@ -338,6 +345,8 @@ class RescueBehaviour(Mission):
                 self._blocked(b, target)
                 return
             self.grid.mark_path(start, self.pose[:2])
+            if pace is not None and self.drive_hearing.stopped:
+                return   # a window heard on the way changed what is worth most
 
     def _blocked(self, b: Blocked, target: MapSource | None) -> None:
         self.contacts[b.kind] += 1

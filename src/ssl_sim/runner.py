@@ -210,10 +210,11 @@ class RescueRun:
         if acoustics.config.fs != sc.localizer.fs:
             raise ValueError(f"localizer.fs = {sc.localizer.fs} Hz differs from the simulated audio "
                              f"({acoustics.config.fs} Hz)")
-        # A driving array's room response held for 2.5 cm (SimAudioSource.pose_hold_m): hearing while driving
-        # renders a 50 ms read per control tick, each otherwise a new response.
+        # Hearing while driving renders a 50 ms read per control tick, each otherwise a new room response: a
+        # driving array's response is held for 2.5 cm (SimAudioSource.pose_hold_m).
+        hold = 0.025 if sc.behaviour.listen_while_driving else 0.0
         self.audio = SimAudioSource(robot, acoustics, on_block=self._on_block, ego_noise=sc.ego_noise,
-                                    pose_hold_m=0.025)
+                                    pose_hold_m=hold)
         self.physics, self.truth = _Stopwatch(), _Stopwatch()   # the loop's split (results' wall_clock_s)
         # The run's seed draws the gyro's noise and drift.
         self.drive = _TimedDrive(robot, self.physics, seed=sc.seed, range_layout=range_layout)
