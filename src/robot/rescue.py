@@ -2,7 +2,9 @@
 
 One cycle (``RescueBehaviour._cycle``) walks the data path, each stage in its own module:
 
-* **hear** standing still (``robot.listening``: SRP-PHAT detections, tracks, voice evidence; ARRAY frame);
+* **hear** standing still (``robot.listening``: SRP-PHAT detections, tracks, voice evidence; ARRAY frame), and
+  with ``listen_while_driving`` also every ``listen_s`` of a move (``robot.drive_hearing``: the drive's noise
+  suppressed; the move ends early when what it heard changes the option worth most);
 * **believe** (``robot.sound_map`` + ``robot.coverage``): world-frame sources with position, covariance and
   P(victim); per floor cell, P(a caller there is still unheard);
 * **found** (``robot.found``): every unfound source near the robot or heard now is judged by P(a victim lies within
