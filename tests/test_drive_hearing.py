@@ -165,3 +165,29 @@ def test_the_motors_residue_makes_no_peak_on_the_rim_of_their_mask(suppressor):
         hal.close()
     exclude = suppressor.config.exclude_deg
     assert off and not [a for a in off if exclude <= a <= exclude + 5.0], off
+
+
+def test_a_rescue_run_that_hears_while_driving_uses_its_own_found_model_and_hears_the_callers():
+    from ssl_sim.runner import RescueRun
+
+    sc = load_scenario("light_rubble_three").with_overrides(time_limit_s=25.0)
+    sc = replace(sc, behaviour=replace(sc.behaviour, listen_while_driving=True))
+    with warnings.catch_warnings():
+        warnings.simplefilter("ignore")
+        run = RescueRun(sc, seed=0)
+        r = run.run()
+    b = run.behaviour
+    assert b.drive_hearing is not None and b.localizer.ego_noise is not None
+    assert b.found_model.provenance["data"].endswith("assessments_driving.csv.gz")
+    driving = [e for e in b.events if e.reason.startswith("while driving")]
+    assert b.drive_hearing.windows >= 3 and len(driving) == b.drive_hearing.windows
+    # every localizer result is scored against the truth at its window's middle (the runner's listens): the
+    # callers' detections heard while driving are as accurate as those heard standing
+    assert len(r["listens"]) >= b.drive_hearing.windows + 3
+    moving_times = {round(e.time, 2) for e in driving}
+    errors = {True: [], False: []}
+    for rec in r["listens"]:
+        errors[round(rec["time_s"], 2) in moving_times] += [d["error_deg"] for d in rec["detections"]
+                                                             if d.get("source_kind") == "victim"]
+    assert errors[True] and errors[False]
+    assert np.median(errors[True]) <= max(10.0, np.median(errors[False]) + 3.0), errors

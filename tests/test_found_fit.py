@@ -18,11 +18,13 @@ def _tool():
     return mod
 
 
-def test_refitting_the_committed_data_reproduces_the_committed_model():
+@pytest.mark.parametrize("driving", [False, True], ids=["standing", "driving"])
+def test_refitting_the_committed_data_reproduces_the_committed_model(driving):
     tool = _tool()
-    committed = json.loads(default_model_path().read_text())
+    committed = json.loads(default_model_path(driving).read_text())
     assert "tools/fit_found_model.py" in committed["provenance"]["fitted_by"]
-    refit = tool.fit(write=False)
+    assert committed["provenance"]["data"].endswith("assessments_driving.csv.gz" if driving else "assessments.csv.gz")
+    refit = tool.fit(write=False, driving=driving)
     assert refit["bias"] == pytest.approx(committed["bias"], abs=1e-3)
     for name, w in committed["weights"].items():
         assert refit["weights"][name] == pytest.approx(w, abs=1e-3), name
@@ -43,5 +45,6 @@ def test_the_fit_recovers_known_weights_from_synthetic_labels():
 
 
 def test_the_committed_model_names_every_cue_and_loads():
-    m = FoundModel.load()
-    assert set(m.weights) == {c.name for c in CUES}
+    for driving in (False, True):
+        m = FoundModel.load(driving=driving)
+        assert set(m.weights) == {c.name for c in CUES}

@@ -4,6 +4,10 @@
     python tools/fit_found_model.py fit                                         # -> robot/models/found_model.json
     python tools/fit_found_model.py curve [--first 200 --count 24 --p 0.5 0.7 0.8 0.9 0.95]
 
+``--driving`` (each command): the runs also hear while driving (``RescueConfig.listen_while_driving``), their
+data ``assessments_driving.csv.gz`` and model ``robot/models/found_model_driving.json``: bearings heard on the
+way add listens between the standing ones, so a cue such as support means less per listen there.
+
 ``collect`` runs the behaviour on train scenarios (seed = index) and writes every P(find) judgement it made
 (``RescueBehaviour.assessments``: the cues' features per source per listen) with its label from the simulator's
 truth: 1 when a victim not yet found lies within ``FIND_RADIUS_M`` of the report (the map's estimate) and the robot's
@@ -44,6 +48,11 @@ from robot.rescue_config import RescueConfig  # noqa: E402
 
 OUT = ROOT / "experiments" / "found_model"
 DATA = OUT / "assessments.csv.gz"
+
+
+def data_path(driving: bool = False) -> Path:
+    """The assessments of the runs that listen standing, or that also hear while driving (``--driving``)."""
+    return OUT / "assessments_driving.csv.gz" if driving else DATA
 NAMES = [c.name for c in CUES]
 #: Prior mean of each weight (log-odds per unit of the cue), from the cue's physics: what it should add where the
 #: train data is silent. The generated victims' mouths lie 0.15-0.48 m up and the array 0.27 m, so steep bearings,
@@ -68,14 +77,17 @@ P_FIND = RescueConfig().p_find   # the threshold the confirm probability is meas
 
 
 # ----------------------------------------------------------------------------- collecting
-def _label_run(index: int, p_find: float | None = None, confirm: float | None = None) -> tuple[list[dict], dict]:
-    """Run train scenario ``index``; its assessments with labels, and the run's find summary."""
+def _label_run(index: int, p_find: float | None = None, confirm: float | None = None, driving: bool = False
+               ) -> tuple[list[dict], dict]:
+    """Run train scenario ``index`` (``driving``: hearing while driving too); its assessments with labels, and
+    the run's find summary."""
     from ssl_sim.runner import RescueRun
     from ssl_sim.suite import generate
 
     sc = generate("train", index)
     if p_find is not None:
         sc = replace(sc, behaviour=replace(sc.behaviour, p_find=p_find))
+    sc = replace(sc, behaviour=replace(sc.behaviour, listen_while_driving=driving))
     if confirm is not None:
         sc = replace(sc, pursuit=replace(sc.pursuit, confirm_probability=confirm))
     run = RescueRun(sc)
@@ -104,20 +116,21 @@ def _pool(fn, args, workers: int):
         return list(ex.map(fn, *zip(*args)))
 
 
-def collect(first: int, count: int, workers: int, p_find: float | None = None) -> None:
-    out = _pool(_label_run, [(i, p_find) for i in range(first, first + count)], workers)
+def collect(first: int, count: int, workers: int, p_find: float | None = None, driving: bool = False) -> None:
+    out = _pool(_label_run, [(i, p_find, None, driving) for i in range(first, first + count)], workers)
+    data = data_path(driving)
     rows = [r for rs, _ in out for r in rs]
     OUT.mkdir(parents=True, exist_ok=True)
     buf = io.StringIO()
     w = csv.DictWriter(buf, fieldnames=["scenario", "time", "source", *NAMES, "label"], lineterminator="\n")
     w.writeheader()
     w.writerows(rows)
-    with gzip.GzipFile(DATA, "wb", mtime=0) as f:   # mtime 0: the same rows give the same file
+    with gzip.GzipFile(data, "wb", mtime=0) as f:   # mtime 0: the same rows give the same file
         f.write(buf.getvalue().encode())
     found = sum(s["found"] for _, s in out)
     print(f"collected {len(rows)} assessments ({sum(r['label'] for r in rows)} positive) from {count} train "
           f"scenarios {first}..{first + count - 1}; the collecting model found {found} of "
-          f"{sum(s['victims'] for _, s in out)} victims -> {DATA.relative_to(ROOT)}")
+          f"{sum(s['victims'] for _, s in out)} victims -> {data.relative_to(ROOT)}")
 
 
 # ----------------------------------------------------------------------------- fitting
@@ -177,7 +190,8 @@ def _git_commit() -> str:
         return "unknown"
 
 
-def fit(write: bool = True, path: Path = DATA) -> dict:
+def fit(write: bool = True, path: Path | None = None, driving: bool = False) -> dict:
+    path = data_path(driving) if path is None else path
     X, y, rows = load_data(path)
     bias, w = fit_logistic(X, y, L2, np.array([PRIOR[k] for k in NAMES]))
     p = 1.0 / (1.0 + np.exp(-(bias + X @ w)))
@@ -198,14 +212,14 @@ def fit(write: bool = True, path: Path = DATA) -> dict:
         },
     }
     if write:
-        default_model_path().write_text(json.dumps(model, indent=2) + "\n")
-        _figures(X, y, p, model)
-        print(f"wrote {default_model_path().relative_to(ROOT)}")
+        default_model_path(driving).write_text(json.dumps(model, indent=2) + "\n")
+        _figures(X, y, p, model, "fit_driving.png" if driving else "fit.png")
+        print(f"wrote {default_model_path(driving).relative_to(ROOT)}")
     print(json.dumps(model, indent=2))
     return model
 
 
-def _figures(X, y, p, model) -> None:
+def _figures(X, y, p, model, name: str) -> None:
     import matplotlib
     matplotlib.use("Agg")
     import matplotlib.pyplot as plt
@@ -228,21 +242,21 @@ def _figures(X, y, p, model) -> None:
     b.barh(list(ws), list(ws.values()))
     b.set(xlabel="log-odds per unit of the cue", title=f"weights (bias {model['bias']:.2f})")
     fig.tight_layout()
-    fig.savefig(OUT / "fit.png", dpi=110)
+    fig.savefig(OUT / name, dpi=110)
     plt.close(fig)
 
 
 # ----------------------------------------------------------------------------- trade-off curve
-def curve(first: int, count: int, values: list[float], workers: int) -> None:
-    X, y, _ = load_data()
-    m = json.loads(default_model_path().read_text())
+def curve(first: int, count: int, values: list[float], workers: int, driving: bool = False) -> None:
+    X, y, _ = load_data(data_path(driving))
+    m = json.loads(default_model_path(driving).read_text())
     p = 1.0 / (1.0 + np.exp(-(m["bias"] + X @ np.array([m["weights"][k] for k in NAMES]))))
     confirm = {pf: confirm_probability(p, X, y, pf)[0] for pf in values}
-    tasks = [(i, pf, confirm[pf]) for pf in values for i in range(first, first + count)]
+    tasks = [(i, pf, confirm[pf], driving) for pf in values for i in range(first, first + count)]
     out = _pool(_label_run, tasks, workers)
     rows = []
     for pf in values:
-        ss = [s for (i, q, _), (_, s) in zip(tasks, out) if q == pf]
+        ss = [s for (i, q, _, _), (_, s) in zip(tasks, out) if q == pf]
         times = [t for s in ss for t in s["find_times"]]
         rows.append({"p_find": pf, "confirm_probability": round(confirm[pf], 4), "runs": len(ss),
                      "too_far_per_run": sum(s["too_far"] for s in ss) / len(ss), "found": sum(s["found"] for s in ss) / sum(s["victims"] for s in ss),
@@ -250,7 +264,8 @@ def curve(first: int, count: int, values: list[float], workers: int) -> None:
                      "mean_time_to_find_s": float(np.mean(times)) if times else None})
         print(json.dumps(rows[-1]))
     OUT.mkdir(parents=True, exist_ok=True)
-    (OUT / "p_find_curve.json").write_text(json.dumps({"train_scenarios": f"{first}..{first + count - 1}",
+    name = "p_find_curve_driving" if driving else "p_find_curve"
+    (OUT / f"{name}.json").write_text(json.dumps({"train_scenarios": f"{first}..{first + count - 1}",
                                                        "commit": _git_commit(), "rows": rows,
                                                        "runs": [{"p_find": t[1], **s} for t, (_, s) in zip(tasks, out)]},
                                                       indent=2) + "\n")
@@ -266,7 +281,7 @@ def curve(first: int, count: int, values: list[float], workers: int) -> None:
     ax.set(xlabel="mean time to find (s)", ylabel="false finds per run",
            title=f"p_find trade-off, train {first}..{first + count - 1}")
     fig.tight_layout()
-    fig.savefig(OUT / "p_find_curve.png", dpi=110)
+    fig.savefig(OUT / f"{name}.png", dpi=110)
     plt.close(fig)
 
 
@@ -285,13 +300,16 @@ def main(argv=None) -> None:
     k.add_argument("--count", type=int, default=24)
     k.add_argument("--p", type=float, nargs="+", default=[0.5, 0.7, 0.8, 0.9, 0.95])
     k.add_argument("--workers", type=int, default=2)
+    for sp in (c, f, k):
+        sp.add_argument("--driving", action="store_true",
+                        help="the model of runs that also hear while driving (found_model_driving.json)")
     a = ap.parse_args(argv)
     if a.cmd == "collect":
-        collect(a.first, a.count, a.workers, a.p_find)
+        collect(a.first, a.count, a.workers, a.p_find, a.driving)
     elif a.cmd == "fit":
-        fit(write=not a.dry_run)
+        fit(write=not a.dry_run, driving=a.driving)
     else:
-        curve(a.first, a.count, a.p, a.workers)
+        curve(a.first, a.count, a.p, a.workers, a.driving)
 
 
 if __name__ == "__main__":

@@ -343,8 +343,10 @@ class Assessment:
         return f"P(find) {self.probability:.2f} (log-odds terms: {top or 'none positive'})"
 
 
-def default_model_path() -> Path:
-    return Path(__file__).with_name("models") / "found_model.json"
+def default_model_path(driving: bool = False) -> Path:
+    """The committed model; ``driving``: the one fitted on runs that also hear while driving (its listens add
+    bearings between the standing ones, so support and triangulation mean less per listen)."""
+    return Path(__file__).with_name("models") / ("found_model_driving.json" if driving else "found_model.json")
 
 
 @dataclass(frozen=True)
@@ -368,10 +370,10 @@ class FoundModel:
             raise ValueError("FoundModel: expected finite bias and weights")
 
     @classmethod
-    def load(cls, path: str | Path | None = None) -> "FoundModel":
-        """The fitted model (``default_model_path()`` unless ``path``). A missing or malformed file raises
+    def load(cls, path: str | Path | None = None, driving: bool = False) -> "FoundModel":
+        """The fitted model (``default_model_path(driving)`` unless ``path``). A missing or malformed file raises
         ``ValueError`` naming it."""
-        path = Path(path) if path is not None else default_model_path()
+        path = Path(path) if path is not None else default_model_path(driving)
         try:
             doc = json.loads(path.read_text())
             return cls(float(doc["bias"]), {k: float(v) for k, v in doc["weights"].items()},

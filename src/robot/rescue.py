@@ -77,7 +77,6 @@ class RescueBehaviour(Mission):
         super().__init__(drive, clock, config.fatal_faults)
         self.audio, self.localizer, self.config = audio, localizer, config
         self.mount = mount
-        self.found_model = found_model if found_model is not None else FoundModel.load()
         self.odometry = Odometry(params, start_pose, gyro, travel)
         self.grid = OccupancyGrid(occupancy, origin=np.asarray(start_pose, float)[:2])
         self.range_layout = range_layout
@@ -95,6 +94,9 @@ class RescueBehaviour(Mission):
         if config.listen_while_driving and getattr(localizer, "ego_noise", None) is not None:
             self.drive_hearing = DriveHearing(self.listener, clock, lambda: self.pose, config.listen_s,
                                               config.min_power, self._heard_driving)
+        # P(find)'s cues were fitted on runs that heard the way this one hears (robot.found.default_model_path)
+        self.found_model = found_model if found_model is not None else FoundModel.load(
+            driving=self.drive_hearing is not None)
         self.map = SoundMap(sound_map, mount)
         self.coverage = ListeningCoverage(self.grid.origin, self.grid.n, self.grid.resolution, coverage,
                                           memory_budget_mb=self.grid.coverage_store_mb)
