@@ -3,8 +3,8 @@
 ``ego_noise_suppressor`` runs ``robot.ego_calibration.calibrate_ego_noise`` (``ssl-robot calibrate-ego-noise`` on
 hardware) on the simulated robot with the scenario's motor noise, in the empty paper lab with nobody calling, and
 builds the localizer's ``ssl_core.ego_noise.EgoNoiseSuppressor`` from that template and the robot's motor mount.
-The calibration (about 30 s of simulated turning, 2.7 s of CPU) is made once per process for each motor-noise
-model and array height: a robot is calibrated once, not in every room it searches.
+The calibration (21 s of simulated turning through 15 wheel speeds, 2.7 s of CPU) is made once per process for
+each motor-noise model and array height: a robot is calibrated once, not in every room it searches.
 """
 from __future__ import annotations
 
