@@ -643,8 +643,9 @@ class Localizer:
             floor = max(cfg.min_power, cfg.rel_threshold * peaks[0][0]) if peaks else cfg.min_power
             # A pooled coarse value bounds the refined power in its cap from above: refine the best
             # few local maxima, skipping those that cannot beat the floor or the best so far.
-            maxima = local_maxima(coarse, self._neighbours, top=4)
-            if excluded is not None:
+            if excluded is None:
+                maxima = local_maxima(coarse, self._neighbours, top=4)
+            else:
                 # Maxima of the map with the motors' directions in it, those outside them kept: masked first,
                 # the motors' residue peaks on the mask's rim (their lobes fall off across it), a point
                 # with no sound of its own (measured while driving: peaks 31 deg from two motors with a
