@@ -4,32 +4,25 @@ from __future__ import annotations
 
 import warnings
 from dataclasses import replace
-from functools import lru_cache
 
 import numpy as np
 
-from robot.ego_calibration import MotorMount, calibrate_ego_noise
+from robot.ego_calibration import MotorMount
 from ssl_core.ego_noise import EgoNoiseSuppressor, EgoNoiseTemplate
 from ssl_core.geometry import cube8
 from ssl_core.localizer import Localizer
 from ssl_core.tracking import TRACKING_MIN_SIGNIFICANCE, Tracker
+from ssl_sim.acoustics.ego_noise import EgoNoiseConfig as SimEgoNoise
 from ssl_sim.backends import array_frame_directions, make_sim_hal
+from ssl_sim.calibration import ego_noise_template
 from ssl_sim.scenario import load_scenario
 
 BLOCK = 2048  # one localizer window (8 hops of 256 samples at 16 kHz)
 
 
-@lru_cache(maxsize=1)
-def calibration_template(seed: int = 100) -> EgoNoiseTemplate:
-    """``robot.ego_calibration`` run on the simulated robot in the empty lab, nobody calling."""
-    sc = load_scenario("paper_lab")
-    with warnings.catch_warnings():
-        warnings.simplefilter("ignore")
-        hal = make_sim_hal(sc.world(0), sources=[], acoustic_config=sc.acoustic_config(seed))
-    try:
-        return calibrate_ego_noise(hal.drive, hal.audio, hal.clock, record_s=1.0, settle_s=0.4)
-    finally:
-        hal.close()
+def calibration_template() -> EgoNoiseTemplate:
+    """``robot.ego_calibration`` run on the simulated robot in the empty lab, nobody calling (cached)."""
+    return ego_noise_template(SimEgoNoise(), 16000)
 
 
 def suppressor(template: EgoNoiseTemplate | None, **kw) -> EgoNoiseSuppressor | None:

@@ -17,6 +17,8 @@ from robot.mount import ArrayMount
 from ssl_core.ego_noise import EgoNoiseSuppressor, EgoNoiseTemplate
 from ssl_core.geometry import cube8
 from ssl_sim.acoustics.ego_noise import EgoNoiseConfig
+from ssl_sim.backends import make_sim_hal
+from ssl_sim.scenario import load_scenario
 
 __all__ = ["ego_noise_template", "ego_noise_suppressor"]
 
@@ -27,9 +29,6 @@ CALIBRATION_SEED = 100            # the calibration room's acoustic draw (not an
 @lru_cache(maxsize=4)
 def ego_noise_template(ego: EgoNoiseConfig, fs: int) -> EgoNoiseTemplate:
     """The template a calibration run of the simulated drive with motor noise ``ego`` records at ``fs`` Hz."""
-    from ssl_sim.backends import make_sim_hal
-    from ssl_sim.scenario import load_scenario
-
     sc = load_scenario(CALIBRATION_SCENE)
     acoustic = sc.acoustic_config(CALIBRATION_SEED)
     if acoustic.fs != fs:

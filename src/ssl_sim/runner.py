@@ -314,8 +314,8 @@ class RescueRun:
         n0, n, _ = self._blocks[-1]
         start = n0 + n - int(n_samples)
         middle = start + 0.5 * n_samples
-        for b0, bn, poses in reversed(self._blocks):
-            if b0 <= middle < b0 + bn or b0 <= start:
+        for b0, bn, poses in reversed(self._blocks):   # contiguous reads: the last one starting before the middle
+            if b0 <= middle:
                 k = int(round(min(max((middle - b0) / bn, 0.0), 1.0) * (len(poses) - 1))) if poses else 0
                 return (poses[k] if poses else self.robot.array_pose()), (start, int(n_samples))
         return self.robot.array_pose(), (start, int(n_samples))
