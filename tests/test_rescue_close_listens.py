@@ -43,18 +43,19 @@ def _level_from(caller, origin):
 
 
 def test_restart_from_keeps_only_the_listens_heard_there():
-    # Two callers; one bearing to each from two poses 1.2 m apart cross at a ghost the map takes for one source.
-    a, b = np.array([4.0, 2.0, 0.1]), np.array([1.5, -2.0, 0.1])
+    # Two callers; one bearing to each from two poses 2.6 m apart cross at a ghost (2.4, 1.2) the map takes for one
+    # source (1.3 m and 2.2 m from where they were heard: a crossing that could be a mouth).
+    a, b = np.array([4.0, 2.0, 0.1]), np.array([2.4, 3.5, 0.1])
     m = SoundMap()
     (_, sid), = m.update([_Ev(a, (0.0, 0.0))], (0.0, 0.0, 0.0), 1.0)
-    (_, sid2), = m.update([_Ev(b, (1.2, 0.8))], (1.2, 0.8, 0.0), 2.0)
+    (_, sid2), = m.update([_Ev(b, (2.4, -1.0))], (2.4, -1.0, 0.0), 2.0)
     assert sid2 == sid                                     # two callers' rays cross: one (ghost) source
     ghost = m.source(sid)
     assert min(np.hypot(*(ghost.position[:2] - p[:2])) for p in (a, b)) > 1.0
-    assert m.restart_from(sid, (1.2, 0.8)) == 1
+    assert m.restart_from(sid, (2.4, -1.0)) == 1
     s = m.source(sid)
-    # now along the bearing heard at (1.2, 0.8), toward caller b, with its range open again
-    off = math.atan2(s.position[1] - 0.8, s.position[0] - 1.2) - math.atan2(b[1] - 0.8, b[0] - 1.2)
+    # now along the bearing heard at (2.4, -1.0), toward caller b, with its range open again
+    off = math.atan2(s.position[1] + 1.0, s.position[0] - 2.4) - math.atan2(b[1] + 1.0, b[0] - 2.4)
     assert abs(off) < math.radians(2)
     assert s.horizontal_sigma_m > 1.0 and not s.triangulated
 

@@ -152,3 +152,22 @@ def test_sources_are_numbered_from_one_like_the_victims_found():
         d = np.array(p) - [0, 0, H]
         m.update([Ev(k, d / np.linalg.norm(d), 0.0, 0.9)], (0.0, 0.0, 0.0), 0.0)
     assert sorted(s.id for s in m.sources) == [1, 2]
+
+
+def test_two_rays_crossing_beside_the_second_listen_stay_two_sources():
+    """Two callers far apart, each heard along one ray from spots 0.36 m apart: the rays cross 0.36 m from the
+    second spot, a point no bearing there could tell from any other (a mouth that close is heard steeply). The
+    map keeps two sources along their rays, neither at the crossing, whether by association or by merging."""
+    m = SoundMap()
+    far_a = np.array([4.0, 0.0, 0.2])                 # along +x from the first spot, 4 m out
+    d = far_a - [0.0, 0.0, H]
+    m.update([Ev(None, d / np.linalg.norm(d), 0.0, 0.9)], (0.0, 0.0, 0.0), 0.0)
+    spot = np.array([0.2, 0.35])
+    crossing = np.array([0.3, 0.0])                   # on the first ray, 0.36 m from the second spot
+    u = crossing - spot
+    far_b = np.append(spot + 3.0 * u / np.linalg.norm(u), 0.2)   # the second caller, 3 m out along that line
+    d = far_b - [spot[0], spot[1], H]
+    m.update([Ev(None, d / np.linalg.norm(d), 1.0, 0.9)], (spot[0], spot[1], 0.0), 1.0)
+    assert len(m.sources) == 2
+    for s in m.sources:
+        assert np.linalg.norm(s.position[:2] - crossing) > 0.3

@@ -592,12 +592,13 @@ class SoundMap:
         inflate = 1.0 + 1.0 / len(src.rays)   # the mean ray's own noise
         chi2 = (_wrap(az - az_m) ** 2 / math.radians(cfg.bearing_sigma_deg) ** 2
                 + (el - el_m) ** 2 / math.radians(cfg.elevation_sigma_deg) ** 2) / inflate
-        # Heard from a spot on (or beside) that ray, any bearing crosses it right there: no evidence. A mouth that
-        # close would be heard steeply, as a source of its own (measured, light rubble seed 2: a ray 90 deg off
-        # the first, heard 0.2 m beside it, triangulated with it into a ghost 0.2 m from the robot, then declared
-        # found by a -20 deg bearing 1.6 m from any caller).
-        chi2 = np.where(np.hypot(v[:, 0], v[:, 1]) >= NEAR_CROSSING_M, chi2, np.inf)
-        return float(chi2.min())
+        # Heard from a spot on (or beside) that ray, any bearing crosses it right there: no evidence (a mouth that
+        # close would be heard steeply, as a source of its own), else two callers' rays heard a few decimetres
+        # apart triangulate into a ghost beside the robot. The best agreement itself must lie that far out: the
+        # gate (3.7 bearing sigmas, 18 deg) lets a point 0.5 m out pass for a ray that meets the segment 0.3 m
+        # out, and the refit would then move the source onto that near crossing.
+        best = int(np.argmin(chi2))
+        return float(chi2[best]) if math.hypot(v[best, 0], v[best, 1]) >= NEAR_CROSSING_M else math.inf
 
     def _associate(self, ev: BearingEvidence, origin: np.ndarray, d: np.ndarray, taken: set[int]) -> int | None:
         cfg = self.config
@@ -679,7 +680,14 @@ class SoundMap:
         rays = a.rays + b.rays
         o = np.array([r.origin for r in rays])
         d = np.array([r.direction for r in rays])
-        _, _, inl = triangulate(o, d, cfg, self._rng)
+        p, _, inl = triangulate(o, d, cfg, self._rng)
+        heard_at = {a.id: o[:len(a.rays), :2], b.id: o[len(a.rays):, :2]}
+        for one, other in ((a, b), (b, a)):
+            # A source heard along one ray joins another only where their rays cross away from where the other was
+            # heard, the association's rule (``_along_ray``): a merge must not make the ghost association refused.
+            if _crossing_deg(one.rays) < cfg.min_pair_angle_deg \
+                    and np.hypot(*(heard_at[other.id] - p[:2]).T).min(initial=math.inf) < NEAR_CROSSING_M:
+                return False
         return bool(inl[:len(a.rays)].mean() >= 0.7 and inl[len(a.rays):].mean() >= 0.7)
 
     def _forget(self) -> None:
