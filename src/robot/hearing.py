@@ -411,8 +411,8 @@ def speech_fractions(samples: np.ndarray, mic_positions: np.ndarray, directions:
     The streaming chain of ``Hearing`` (MPDR beams, noise suppression, gain, Silero, speech credited to
     the beam that owns it) on a fresh state, listening all the time, fed ``block_s`` at a time with
     the MPDR refreshed every block (its covariance is the listen's so far). Measured against the
-    delay-and-sum beam it replaces, on the listens of simulated rescues (light_rubble_three seed 0,
-    120 s): a talking victim's detection had speech in >= 10 % of frames in 84 % of listens (delay-and-sum
+    delay-and-sum beam it replaces, on the listens of a simulated 120 s rescue in light rubble: a talking
+    victim's detection had speech in >= 10 % of frames in 84 % of listens (delay-and-sum
     8 %); detections of the generator and the pump (generator_louder, dense_pump): 0 % in both."""
     d = np.asarray(directions, float).reshape(-1, 3)
     if not len(d):

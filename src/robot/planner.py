@@ -317,8 +317,8 @@ class Planner:
         # distance_scale_m) as a target is: in a pocket of rubble whose floor is covered the ring offers only
         # visited floor (measured, dense_pump: the robot circled its start for 100-250 s), the way out leads on.
         # A ring goal worth nothing (heard floor, learned obstacles) is no goal: with no frontier either, the
-        # behaviour's clearing recovery must look again (measured, dense_pump seed 4: 80 s stepping to and fro
-        # between two such goals inside a ring of misplaced contacts beside the pump).
+        # behaviour's clearing recovery must look again (else the robot steps to and fro between two such goals
+        # inside a ring of misplaced contacts: 80 s of it was measured beside a loud pump).
         if best is not None and best[0] > 0 and (far is None or self._worth(best[0], best[1].length) >= far[1]):
             self._frontier = None
             return best[1], f"toward unheard floor at {best[2]:.0f} deg (world), {best[0]:.2f} unheard/away score"
@@ -363,7 +363,7 @@ class Planner:
         ij = np.unravel_index(int(np.argmax(utility)), utility.shape)
         # The frontier goal chosen before, while still unvisited, reachable and not reached, counts keep_factor
         # times (as the current target does): without it the robot turned back and forth between frontiers as
-        # each step changed their path lengths (measured, dense_pump seed 1: 100 s between two of them).
+        # each step changed their path lengths (100 s between two of them was measured in dense rubble).
         kept = self._frontier
         self._frontier = None
         if kept is not None:

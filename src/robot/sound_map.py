@@ -101,9 +101,8 @@ class SoundMapConfig:
     max_log_odds: float = 6.0              # |sum of listen log-odds| cap
     max_range_m: float = 15.0              # no source farther than this from where it was heard
     min_range_m: float = 0.05              # ... nor nearer (horizontally) than this: not inside the array's mast. A
-    #                                        mouth can be right below the bumper ring (0.16 m): measured, light rubble
-    #                                        seed 6, a caller heard at -67 deg elevation 6 cm out had no inlier ray
-    #                                        with 0.2 m and was never declared found
+    #                                        mouth can be right below the bumper ring (0.16 m): a caller heard at
+    #                                        -67 deg elevation lies 6 cm out, which a 0.2 m floor would refuse
     # A listen without speech says less the fainter the beam: the VAD hears speech in the beam toward a calling
     # caller in 32 % of listens at >= -51 dB re full scale but 12 % at -60..-51 dB and 4 % below (measured:
     # light_rubble_three seeds 0-7 of the simulated capture chain, 499 detections of callers within 15 deg),
@@ -195,14 +194,23 @@ class MapSource:
     baseline_m: float = 0.0        # largest horizontal distance between two listening poses of its inliers
     crossing_deg: float = 0.0      # largest crossing angle of two inlier bearings from different poses
     min_crossing_deg: float = 15.0  # the map's min_pair_angle_deg
+    heard: int = 1                 # listens that heard it, of ...
+    listens_since: int = 1         # ... the map's listens since it was first heard (that one included)
+
+    @property
+    def hearing_rate(self) -> float:
+        """P(the next listen hears it): the fraction of listens since it was first heard that heard it, with a
+        uniform prior (Laplace's rule). A caller between calls, a reflection heard once, a source behind rubble
+        from here: low; a machine that never stops: near 1."""
+        return (self.heard + 1.0) / (self.listens_since + 2.0)
 
     @property
     def triangulated(self) -> bool:
         """Its range comes from geometry, not only from the height prior: two inlier bearings from different
         poses cross at ``min_pair_angle_deg`` or more (15 deg: 3 bearing sigmas). A baseline alone is not
-        enough: 0.3 m seen from a caller 4 m away subtends 4 deg, less than the bearing noise (measured, light
-        rubble seed 0: bearings toward the far caller from around the start, their range from the elevation
-        and height prior at ~1 m, declared "at the estimate" and waited on for 10-16 s each, three times)."""
+        enough: 0.3 m seen from a caller 4 m away subtends 4 deg, less than the bearing noise, and the range of
+        such bearings comes from the elevation and the height prior (about 1 m for a far caller heard near the
+        horizon), not from where she is."""
         return self.crossing_deg >= self.min_crossing_deg
 
     @property
@@ -224,6 +232,8 @@ class _Source:
     state: SourceState = SourceState.UNVISITED
     found_time: float | None = None
     max_level_db: float = -math.inf
+    first_listen: int = 0   # the map's listen count when it was first heard
+    heard: int = 0          # listens that heard it (its rays are capped at max_rays; this is not)
 
 
 # ----------------------------------------------------------------------------- geometry
@@ -265,8 +275,7 @@ def _crossing_of(o: np.ndarray, d: np.ndarray) -> float:
 def _along_mean_ray(o: np.ndarray, d: np.ndarray, cfg: SoundMapConfig) -> tuple[np.ndarray, np.ndarray]:
     """Position and covariance of a source heard from one place only: on its rays' mean at the height prior's
     range, at most 3 m, with a range 1-sigma of at least 3 m (it is a guess) and the bearing noise across. Gauss-Newton on such rays has no range to converge to: from
-    six near-level rays of one pose it wandered to points 5-25 m away on any side (measured, behind_partition
-    seed 0: no inlier left, the caller never approached)."""
+    six near-level rays of one pose it wandered to points 5-25 m away on any side, leaving no inlier."""
     origin = o.mean(axis=0)
     u = d.mean(axis=0)
     u /= max(float(np.linalg.norm(u)), 1e-12)
@@ -427,6 +436,7 @@ class SoundMap:
         self._merged_into: dict[int, int] = {}  # merged source id -> the id that absorbed it
         self._rng = np.random.default_rng(config.seed)
         self.time = 0.0
+        self._listens = 0   # updates folded in, empty ones included (each is a chance to hear every source)
 
     # -- reading ------------------------------------------------------------------------
     @property
@@ -460,6 +470,7 @@ class SoundMap:
         if not all(map(math.isfinite, (x, y, yaw, time))):
             raise ValueError(f"pose/time: expected finite numbers, got pose={tuple(pose)!r}, time={time!r}")
         self.time = float(time)
+        self._listens += 1
         c, s = math.cos(yaw), math.sin(yaw)
         rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
         origin = np.array([x, y, self.mount.height_m])
@@ -478,12 +489,13 @@ class SoundMap:
             listen = Listen(float(time), tuple(origin), tuple(d), ev.track_id, float(ev.voice_probability),
                             float(ev.level_db), float(ev.activity))
             if sid is None:
-                src = _Source(self._next_id)
+                src = _Source(self._next_id, first_listen=self._listens)
                 self._next_id += 1
                 self._sources.append(src)
             else:
                 src = self._get(sid)
             src.rays.append(listen)
+            src.heard += 1
             del src.rays[:-self.config.max_rays]
             src.max_level_db = max(src.max_level_db, listen.level_db)
             self._refit(src)
@@ -578,9 +590,9 @@ class SoundMap:
         the source lies somewhere along its mean ray between ``min_range_m`` and ``max_range_m`` (its range is
         unknown), so the new ray must point at some point of that segment. The linearised gate of
         ``_mahalanobis`` fails here: its point estimate sits at the height prior's range, often < 1 m out, and
-        its range spread reaches the robot itself, from which any bearing fits (measured, light_rubble_three
-        seed 7: a caller's ray from 0.1 m beside a ray toward another caller 62 deg away was taken, and the two
-        triangulated into a ghost between them)."""
+        its range spread reaches the robot itself, from which any bearing fits (a caller's ray heard 0.1 m beside
+        a ray toward another caller 62 deg away would be taken, and the two triangulate into a ghost between
+        them)."""
         cfg = self.config
         o = np.array([r.origin for r in src.rays]).mean(axis=0)
         u = np.array([r.direction for r in src.rays]).sum(axis=0)
@@ -650,6 +662,8 @@ class SoundMap:
                         else (b, a)
                     keep.rays = sorted(keep.rays + drop.rays, key=lambda r: r.time)[-cfg.max_rays:]
                     keep.max_level_db = max(keep.max_level_db, drop.max_level_db)
+                    keep.first_listen = min(keep.first_listen, drop.first_listen)
+                    keep.heard = min(keep.heard + drop.heard, self._listens - keep.first_listen + 1)
                     if keep.state is not SourceState.FOUND and drop.state is SourceState.APPROACHING:
                         keep.state = SourceState.APPROACHING
                     if keep.rays:
@@ -717,4 +731,5 @@ class SoundMap:
         return MapSource(s.id, s.position.copy(), s.covariance.copy(), pv, cls, s.state, len(s.rays), len(inl),
                          min(times, default=s.found_time or 0.0), max(times, default=s.found_time or 0.0),
                          s.rays[-1].level_db if s.rays else -math.inf, s.max_level_db, tuple(s.rays), s.found_time,
-                         baseline, _crossing_deg(inl), cfg.min_pair_angle_deg)
+                         baseline, _crossing_deg(inl), cfg.min_pair_angle_deg, s.heard,
+                         max(self._listens - s.first_listen + 1, s.heard))

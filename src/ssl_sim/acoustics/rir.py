@@ -121,8 +121,8 @@ def early_rir(image_positions: np.ndarray, reflection: np.ndarray, mics: np.ndar
 #: Inter-microphone distances are rounded to this (m) before they shape anything: poses of one rigid array
 #: (distances equal to ~1e-15 m) share one geometry key, and a result depends only on the current array,
 #: never on which array was seen first (an earlier 2 mm tolerance reused whatever geometry came first).
-#: Not coarser: 1 mm rounding changes the diffuse tail enough to change where light_rubble_three seed 0's
-#: robot drives (it then found 1 of 3 callers instead of 3; the behaviour is sensitive to the realisation).
+#: The value is part of the simulated world: the rounded distances seed the diffuse tail's realisation, so
+#: another quantum (1 mm, say) re-draws every run's tail and with it the runs' outcomes.
 GEOMETRY_QUANTUM_M = 1e-6
 
 
