@@ -1,7 +1,6 @@
 """What to do next (robot.options): choices on a small free floor with hand-made map sources, checked against what
 the belief says (world frame; the robot at the origin facing +x)."""
 import math
-from dataclasses import replace
 
 import numpy as np
 import pytest
@@ -11,11 +10,11 @@ from robot.found import FIND_RADIUS_M
 from robot.coverage import CoverageConfig, ListeningCoverage
 from robot.motion import MotionConfig
 from robot.occupancy import OccupancyConfig, OccupancyGrid
-from robot.options import OptionKind, OptionsConfig, Timing, _triangulate, area_mass, choose
+from robot.options import OptionKind, OptionsConfig, Timing, area_mass, choose
 from robot.planner import Planner, PlannerConfig
 from robot.pursuit import PursuitConfig, Pursuits
 from robot.rescue import RescueConfig
-from robot.sound_map import Listen, MapSource, SoundMapConfig, SourceClass, SourceState
+from robot.sound_map import MapSource, SoundMapConfig, SourceClass, SourceState
 
 POSE = (0.0, 0.0, 0.0)
 
@@ -40,15 +39,10 @@ class Scene:
                       self.config, current=current)
 
 
-def src(sid, x, y, p=0.9, sigma=0.2, cls=None, heard=5, listens=5, heard_from=POSE[:2]):
-    """A mapped source heard ``heard`` times in ``listens`` listens, every time from ``heard_from`` (world m)."""
+def src(sid, x, y, p=0.9, sigma=0.2, cls=None):
     cls = cls or (SourceClass.VICTIM if p >= 0.6 else SourceClass.INTERFERER if p <= 0.15 else SourceClass.UNKNOWN)
-    o = np.array([*heard_from, 0.3])
-    d = np.array([x, y, 0.2]) - o
-    ray = Listen(0.0, tuple(o), tuple(d / np.linalg.norm(d)), None, p, -40.0, 1.0)
     return MapSource(sid, np.array([x, y, 0.2]), np.diag([sigma ** 2, sigma ** 2, 0.09]), p, cls,
-                     SourceState.UNVISITED, heard, heard, 0.0, 0.0, -40.0, -40.0, (ray,) * min(heard, 1),
-                     crossing_deg=30.0, heard=heard, listens_since=listens)
+                     SourceState.UNVISITED, 5, 5, 0.0, 0.0, -40.0, -40.0, (), crossing_deg=30.0)
 
 
 def test_a_probable_tight_victim_is_approached_rather_than_explored():
@@ -140,36 +134,7 @@ def test_successive_steps_across_a_bearing_go_the_same_way_round():
         assert o.kind is OptionKind.TRIANGULATE
         pose = (*o.plan.waypoints[-1], 0.0)
         poses.append(np.array(pose[:2]))
-        # heard again from the step's end (its spread kept open: the test is about the way round)
-        source = replace(source, history=source.history + src(1, 0.3, 0.0, heard_from=pose[:2]).history)
     bearing = [math.atan2(*(source.position[:2] - q)[::-1]) for q in poses]
     turns = np.diff(np.unwrap(bearing))
     assert np.all(turns < 0) or np.all(turns > 0), bearing
     assert np.hypot(*(poses[2] - poses[0])) > 0.4
-
-
-def test_after_a_step_that_missed_the_source_the_robot_listens_where_it_stands():
-    """Heard from the origin only, the source is 1.5 m away with its range open. From a spot 0.4 m across its
-    bearing (a step whose listen missed it) a bearing heard here already crosses the first at 15 deg: listening
-    again costs one cycle per try, a further step a drive as well, so the option is to listen here."""
-    s = Scene()
-    source = src(1, 1.5, 0.0, p=0.9, sigma=2.5, heard=1, listens=2)
-    o = s.choose([source], pose=(0.0, 0.4, 0.0))
-    assert o.kind is OptionKind.TRIANGULATE and o.plan is None and o.source.id == 1, o.why
-    # where it was heard from, a bearing from here adds nothing: a step across it is the way
-    o = s.choose([source])
-    assert o.kind is OptionKind.TRIANGULATE and o.plan is not None, o.why
-
-
-def test_a_source_heard_in_fewer_listens_is_worth_less_to_triangulate():
-    """The triangulating bearing arrives after 1 / hearing_rate listens on average (Laplace's rule over the
-    listens since it was first heard): a caller heard in 2 of 10 listens is worth less per second than one heard
-    in 9 of 10, by the expected listens that bearing costs."""
-    s = Scene()
-    steady, rare = (src(1, 1.5, 0.0, p=0.9, sigma=2.5, heard=k, listens=10) for k in (9, 2))
-    assert rare.hearing_rate == pytest.approx(3 / 12) and steady.hearing_rate == pytest.approx(10 / 12)
-    assert s.choose([steady]).kind is OptionKind.TRIANGULATE
-    # the same step and the same spread after it: only the listens waited for the bearing differ
-    v = [_triangulate(x, 0.9, 1.0, s.grid, np.zeros(2), 1.5, s.timing, s.config) for x in (steady, rare)]
-    assert v[0].plan is not None and v[1].plan is not None
-    assert 0.9 / v[1].value - 0.9 / v[0].value == pytest.approx(s.timing.cycle_s * (12 / 3 - 12 / 10), rel=1e-9)

@@ -171,26 +171,3 @@ def test_two_rays_crossing_beside_the_second_listen_stay_two_sources():
     assert len(m.sources) == 2
     for s in m.sources:
         assert np.linalg.norm(s.position[:2] - crossing) > 0.3
-
-
-def test_hearing_rate_counts_the_listens_since_a_source_was_first_heard():
-    """A caller heard in 2 of the 5 listens since she was first heard (empty listens count: each was a chance to
-    hear her), and a machine heard in all 5: Laplace's rule gives 3/7 and 6/7."""
-    m = SoundMap()
-    caller, machine = np.array([3.0, 0.0, H]), np.array([0.0, 3.0, H])
-
-    def toward(p, pose):
-        v = p - [pose[0], pose[1], H]
-        return v / np.linalg.norm(v)
-
-    m.update([], (0.0, 0.0, 0.0), 0.0)          # before either is heard: not counted for them
-    for k, hears_caller in enumerate([True, False, False, True, False]):
-        pose = (0.0, 0.0, 0.0)
-        evs = [Ev(1, toward(machine, pose), 1.0 + k, 0.05)]
-        if hears_caller:
-            evs.append(Ev(2, toward(caller, pose), 1.0 + k, 0.9))
-        m.update(evs, pose, 1.0 + k)
-    s_caller, s_machine = _closest(m, caller), _closest(m, machine)
-    assert (s_caller.heard, s_caller.listens_since) == (2, 5)
-    assert (s_machine.heard, s_machine.listens_since) == (5, 5)
-    assert s_caller.hearing_rate == pytest.approx(3 / 7) and s_machine.hearing_rate == pytest.approx(6 / 7)

@@ -8,10 +8,9 @@ Options (``OptionKind``), each valued from the belief (world/odometry frame):
   Bearings heard on the way narrow a loose estimate, and its 1-sigma is the path it may still move by: a loose
   estimate costs time, not probability. ``t_drive`` is the path at the drive speed plus a listen per step;
   ``t_confirm`` the cycle time over the per-listen confirm probability;
-* **triangulate** (a step of ``baseline_step_m`` across the bearing, or a listen where the robot stands when it
-  already stands across it): the same victim with the 1-sigma one more bearing from there gives (range x bearing
-  noise / sin(angle the spot subtends)), that bearing arriving after 1 / ``hearing_rate`` listens on average:
-  worth more than approaching when it costs less than the spread it removes (information gain in time);
+* **triangulate** (a step of ``baseline_step_m`` across the bearing): the same victim, after the step, with the
+  1-sigma one more bearing from the new pose gives (range x bearing noise / sin(angle the step subtends)): worth
+  more than approaching when the step costs less than the spread it removes (information gain in time);
 * **explore** (drive to where a listen hears the most still-unheard floor, ``robot.coverage``) and **listen** again
   where the robot stands: the prior density of callers times the floor a listen there would newly hear times the
   detection probability, each caller heard costing ``follow_s`` more to confirm;
@@ -36,7 +35,7 @@ from robot.found import FIND_RADIUS_M
 from robot.occupancy import OccupancyGrid
 from robot.planner import Plan, Planner
 from robot.pursuit import Pursuits
-from robot.sound_map import DISTINCT_POSES_M, MapSource, SourceClass, SourceState
+from robot.sound_map import MapSource, SourceClass, SourceState
 
 __all__ = ["OptionKind", "Option", "OptionsConfig", "Timing", "area_mass", "choose"]
 
@@ -108,49 +107,6 @@ def _across(grid: OccupancyGrid, xy: np.ndarray, target_xy, step: float) -> np.n
     return None
 
 
-def _subtended(s: MapSource, at) -> float:
-    """Largest angle (rad) at the source's estimate between ``at`` (world m) and the spots it was heard from: the
-    crossing a bearing heard at ``at`` would make with its bearings; 0 where it was heard already (that crossing
-    is in its covariance)."""
-    here = np.asarray(at, float)[:2] - s.position[:2]
-    spots = np.array([r.origin[:2] for r in s.history], float).reshape(-1, 2) - s.position[:2]
-    if not len(spots) or not np.any(here) or np.hypot(*(spots - here).T).min() <= DISTINCT_POSES_M:
-        return 0.0
-    cos = spots @ here / np.maximum(np.linalg.norm(spots, axis=1) * np.linalg.norm(here), 1e-12)
-    return float(np.arccos(np.clip(cos, -1.0, 1.0)).max())
-
-
-def _triangulate(s: MapSource, p: float, bonus: float, grid: OccupancyGrid, xy: np.ndarray, d: float,
-                 timing: Timing, config: OptionsConfig) -> Option | None:
-    """The better way to a bearing that crosses the source's: listen where the robot stands (when it already stands
-    across the bearing, e.g. after a step whose listen missed the source) or step ``baseline_step_m`` across it.
-    Either way the bearing arrives after ``1 / hearing_rate`` listens on average; its worth is the spread it leaves
-    (range x bearing noise / sin(crossing angle))."""
-    h = s.hearing_rate
-
-    def after(angle: float) -> float:
-        return min(s.horizontal_sigma_m, max(0.05, d * timing.bearing_sigma / max(math.sin(angle), 1e-6)))
-
-    here = after(_subtended(s, xy))
-    best = None
-    if here < s.horizontal_sigma_m:
-        v = bonus * p / (timing.cycle_s / h + timing.drive_s(d + here) + timing.confirm_s)
-        best = Option(OptionKind.TRIANGULATE, v, None, s,
-                      f"P(victim there) {p:.2f}, heard in {h:.0%} of listens, +- {s.horizontal_sigma_m:.2f} m now, "
-                      f"~{here:.2f} m after a bearing from here")
-    step = config.baseline_step_m
-    goal = _across(grid, xy, s.position[:2], step)
-    if goal is not None:
-        there = after(_subtended(s, goal))
-        v = bonus * p / (timing.drive_s(step) + timing.cycle_s * (1.0 / h - 1.0) + timing.drive_s(d + there)
-                         + timing.confirm_s)
-        if best is None or v > best.value:
-            best = Option(OptionKind.TRIANGULATE, v, Plan(goal[None], step), s,
-                          f"P(victim there) {p:.2f}, heard in {h:.0%} of listens, +- {s.horizontal_sigma_m:.2f} m "
-                          f"now, ~{there:.2f} m after a {step:g} m step across its bearing")
-    return best
-
-
 def area_mass(s: MapSource, area: tuple[float, float, float, float] | None) -> float:
     """Mass of the source's horizontal Gaussian inside the search area (1 without one)."""
     if area is None:
@@ -187,9 +143,14 @@ def choose(sources: Sequence[MapSource], pursuits: Pursuits, planner: Planner, g
                                   f"P(victim there) {p:.2f}, +- {sig:.2f} m, path {plan.length:.2f} m"))
         d = s.distance_to(xy)
         if sig > FIND_RADIUS_M and d > 1e-6:
-            o = _triangulate(s, p, bonus, grid, xy, d, timing, config)
-            if o is not None:
-                options.append(o)
+            step = config.baseline_step_m
+            after = min(sig, max(0.05, d * timing.bearing_sigma / math.sin(math.atan2(step, d))))
+            v = bonus * p / (timing.drive_s(step) + timing.drive_s(d + after) + timing.confirm_s)
+            goal = _across(grid, xy, s.position[:2], step)
+            if goal is not None:
+                options.append(Option(OptionKind.TRIANGULATE, v, Plan(goal[None], step), s,
+                                      f"P(victim there) {p:.2f}, +- {sig:.2f} m now, ~{after:.2f} m after a "
+                                      f"{step:g} m step across its bearing"))
     gain = coverage.gain(machines)
     area = listening_area if listening_area is not None else math.pi * coverage.config.hearing_radius_m ** 2
 

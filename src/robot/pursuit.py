@@ -38,9 +38,8 @@ class Phase(StrEnum):
 @dataclass(frozen=True)
 class PursuitConfig:
     """``confirm_probability``: P(one close listen confirms a victim who is there) (fitted, see the module
-    docstring). ``max_contacts``: contacts while driving at one source, ``max_steps_across``: triangulating
-    listens (a step across its bearing, or a listen where the robot already stands across it) that left it
-    unranged, before it is set aside for ``aside_s`` s (choices: walls the robot cannot see
+    docstring). ``max_contacts``: contacts while driving at one source, ``max_steps_across``: steps across its
+    bearing that left it unranged, before it is set aside for ``aside_s`` s (choices: walls the robot cannot see
     otherwise draw it along them; a caller gone quiet is not triangulated by stepping to and fro)."""
 
     confirm_probability: float | None = None   # None: the fitted value (robot/models/found_model.json)
@@ -112,8 +111,7 @@ class Pursuits:
         return self._aside_if(p, p.contacts >= self.config.max_contacts, now)
 
     def stepped_across(self, source_id: int, now: float) -> bool:
-        """One more triangulating listen (a step across its bearing, or a listen standing across it); True when
-        that set it aside."""
+        """One more step across its bearing; True when that set it aside."""
         p = self.of(source_id)
         p.steps_across += 1
         return self._aside_if(p, p.steps_across > self.config.max_steps_across, now)

@@ -284,11 +284,8 @@ class RescueBehaviour(Mission):
             self._set_target(s, None)
             if self.pursuits.stepped_across(s.id, self.clock.now()):
                 self._emit(Decision.NO_TARGET, f"source #{s.id} still +- {s.horizontal_sigma_m:.2f} m after "
-                                               f"{self.pursuits.config.max_steps_across} listens to triangulate it: "
+                                               f"{self.pursuits.config.max_steps_across} steps across its bearing: "
                                                "set aside a while", SourcePayload(s.id))
-                return
-            if o.plan is None:   # already across its bearing: the next listen here is the triangulating one
-                self._emit(Decision.NO_TARGET, f"listen again here for #{s.id}: {o.why}", SourcePayload(s.id))
                 return
             self._follow(o.plan.waypoints, RescueState.APPROACH, Decision.DRIVE, s, f"triangulate #{s.id}: {o.why}")
         elif o.kind is OptionKind.EXPLORE:

@@ -194,15 +194,6 @@ class MapSource:
     baseline_m: float = 0.0        # largest horizontal distance between two listening poses of its inliers
     crossing_deg: float = 0.0      # largest crossing angle of two inlier bearings from different poses
     min_crossing_deg: float = 15.0  # the map's min_pair_angle_deg
-    heard: int = 1                 # listens that heard it, of ...
-    listens_since: int = 1         # ... the map's listens since it was first heard (that one included)
-
-    @property
-    def hearing_rate(self) -> float:
-        """P(the next listen hears it): the fraction of listens since it was first heard that heard it, with a
-        uniform prior (Laplace's rule). A caller between calls, a reflection heard once, a source behind rubble
-        from here: low; a machine that never stops: near 1."""
-        return (self.heard + 1.0) / (self.listens_since + 2.0)
 
     @property
     def triangulated(self) -> bool:
@@ -232,8 +223,6 @@ class _Source:
     state: SourceState = SourceState.UNVISITED
     found_time: float | None = None
     max_level_db: float = -math.inf
-    first_listen: int = 0   # the map's listen count when it was first heard
-    heard: int = 0          # listens that heard it (its rays are capped at max_rays; this is not)
 
 
 # ----------------------------------------------------------------------------- geometry
@@ -436,7 +425,6 @@ class SoundMap:
         self._merged_into: dict[int, int] = {}  # merged source id -> the id that absorbed it
         self._rng = np.random.default_rng(config.seed)
         self.time = 0.0
-        self._listens = 0   # updates folded in, empty ones included (each is a chance to hear every source)
 
     # -- reading ------------------------------------------------------------------------
     @property
@@ -470,7 +458,6 @@ class SoundMap:
         if not all(map(math.isfinite, (x, y, yaw, time))):
             raise ValueError(f"pose/time: expected finite numbers, got pose={tuple(pose)!r}, time={time!r}")
         self.time = float(time)
-        self._listens += 1
         c, s = math.cos(yaw), math.sin(yaw)
         rot = np.array([[c, -s, 0.0], [s, c, 0.0], [0.0, 0.0, 1.0]])
         origin = np.array([x, y, self.mount.height_m])
@@ -489,13 +476,12 @@ class SoundMap:
             listen = Listen(float(time), tuple(origin), tuple(d), ev.track_id, float(ev.voice_probability),
                             float(ev.level_db), float(ev.activity))
             if sid is None:
-                src = _Source(self._next_id, first_listen=self._listens)
+                src = _Source(self._next_id)
                 self._next_id += 1
                 self._sources.append(src)
             else:
                 src = self._get(sid)
             src.rays.append(listen)
-            src.heard += 1
             del src.rays[:-self.config.max_rays]
             src.max_level_db = max(src.max_level_db, listen.level_db)
             self._refit(src)
@@ -662,8 +648,6 @@ class SoundMap:
                         else (b, a)
                     keep.rays = sorted(keep.rays + drop.rays, key=lambda r: r.time)[-cfg.max_rays:]
                     keep.max_level_db = max(keep.max_level_db, drop.max_level_db)
-                    keep.first_listen = min(keep.first_listen, drop.first_listen)
-                    keep.heard = min(keep.heard + drop.heard, self._listens - keep.first_listen + 1)
                     if keep.state is not SourceState.FOUND and drop.state is SourceState.APPROACHING:
                         keep.state = SourceState.APPROACHING
                     if keep.rays:
@@ -731,5 +715,4 @@ class SoundMap:
         return MapSource(s.id, s.position.copy(), s.covariance.copy(), pv, cls, s.state, len(s.rays), len(inl),
                          min(times, default=s.found_time or 0.0), max(times, default=s.found_time or 0.0),
                          s.rays[-1].level_db if s.rays else -math.inf, s.max_level_db, tuple(s.rays), s.found_time,
-                         baseline, _crossing_deg(inl), cfg.min_pair_angle_deg, s.heard,
-                         max(self._listens - s.first_listen + 1, s.heard))
+                         baseline, _crossing_deg(inl), cfg.min_pair_angle_deg)
