@@ -263,8 +263,9 @@ def _crossing_of(o: np.ndarray, d: np.ndarray) -> float:
 
 def _along_mean_ray(o: np.ndarray, d: np.ndarray, cfg: SoundMapConfig) -> tuple[np.ndarray, np.ndarray]:
     """Position and covariance of a source heard from one place only: on its rays' mean at the height prior's
-    range, at most 3 m, with a range 1-sigma of at least 3 m (it is a guess) and the bearing noise across. Gauss-Newton on such rays has no range to converge to: from
-    six near-level rays of one pose it wandered to points 5-25 m away on any side, leaving no inlier."""
+    range, at most 3 m, with a range 1-sigma of at least 3 m (it is a guess) and the bearing noise across.
+    Gauss-Newton on such rays has no range to converge to: from six near-level rays of one pose it wandered to
+    points 5-25 m away on any side, leaving no inlier."""
     origin = o.mean(axis=0)
     u = d.mean(axis=0)
     u /= max(float(np.linalg.norm(u)), 1e-12)
