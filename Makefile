@@ -31,8 +31,9 @@ system-deps:
 demo: $(STAMP_RUN)
 	$(PY) -m ssl_sim.demo
 
+# Test files run in parallel, one worker per core; each file stays on one worker (its module fixtures run once).
 test: $(STAMP_TEST) system-deps
-	$(PY) -m pytest -q
+	$(PY) -m pytest -q -n auto --dist loadfile
 
 experiments: $(STAMP_RUN)
 	$(PY) -m experiments.run_all
