@@ -35,6 +35,7 @@ from ssl_core.detection import Detection
 from ssl_core.ego_noise import EgoNoiseSuppressor
 from ssl_core.gcc_phat import LagSteering, band_bins, frame_spectra, summed_phat_cross_spectra
 from ssl_core.geometry import ArrayGeometry, get_array
+from ssl_core.near_field import Focus, FocusScan
 from ssl_core.grid import SphericalGrid, azimuth_elevation, make_grid, n_points_for_spacing
 from ssl_core.noise import NoiseFloor
 from ssl_core.peaks import local_maxima, neighbour_table
@@ -242,6 +243,7 @@ class Localizer:
         self._window_s = cfg.window_frames * cfg.hop / cfg.fs  # the hop between windows (s)
         self._noise_memory = max(1, int(np.ceil(cfg.noise_memory_s / self._window_s)))
         self._lag_steering = LagSteering(self._omega, self._lag_axis / (cfg.fs * cfg.upsample))
+        self._focus = FocusScan(self.geometry, cfg.fs * cfg.upsample, self._max_lag, sound_speed=cfg.sound_speed)
         # Masking a found source: half the GCC main lobe, 1 / (2 f_high).
         f_high = cfg.band_hz[1] if cfg.band_hz else cfg.fs / 2
         self._mask_halfwidth = 0.5 * cfg.fs * cfg.upsample / f_high
@@ -393,6 +395,13 @@ class Localizer:
         level = result.level_db if recording is None else \
             self._beam_level(self._analyse(self._check(recording, None))[0], f)
         return Detection(float(az), float(el), u.copy(), float(p.max()), float(level), z)
+
+    def focus(self, result: LocalizationResult, direction) -> Focus | None:
+        """Range from the wavefront's curvature along unit ``direction`` (array frame), from ``result``'s GCC
+        (:mod:`ssl_core.near_field`); None when the result has no GCC (nothing was heard)."""
+        if result.gcc is None:
+            return None
+        return self._focus.scan(result.gcc, direction)
 
     def _mask(self, gcc: np.ndarray, fine_index: int) -> np.ndarray:
         """``gcc`` with the lags of fine grid point ``fine_index`` zeroed on every pair (a found source)."""
