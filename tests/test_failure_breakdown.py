@@ -147,3 +147,13 @@ def test_undetected_cause_compares_direct_levels_with_the_interferer():
     assert v["undetected_cause"] == "below an interferer at every listen"
     v = fb.classify_run(_run(**{**CASES["undetected"], "level_db": 80.0}))["victims"][0]
     assert v["undetected_cause"] == "above every interferer at some listen"
+
+
+def test_typed_event_payloads_are_logged_as_their_fields():
+    """The tool's own runs log each event's typed payload as a dict the classifier reads by key, not its repr."""
+    from robot.events import HeardCandidate, HeardPayload, TargetPayload
+    t = fb._jsonable(TargetPayload(3, [1.0, 2.0, 0.3], 0.2, 0.9, 0.1, -0.2, 1.5, [[1.0, 1.0]]))
+    assert t["source"] == 3 and t["position"] == [1.0, 2.0, 0.3] and t["waypoints"] == [[1.0, 1.0]]
+    h = fb._jsonable(HeardPayload(1, [HeardCandidate(2, 0.5, -0.1, -50.0, 0.3, False, "victim", "unvisited")], [],
+                                  [0.0, 0.0, 0.0]))
+    assert h["candidates"][0]["source"] == 2 and h["candidates"][0]["class"] == "victim"

@@ -85,7 +85,10 @@ def _map_row(s) -> dict[str, Any]:
 
 
 def _jsonable(v):
-    """An event's data as JSON values (numpy to lists and numbers, enums and the rest as text)."""
+    """An event's data as JSON values (typed payloads as their dicts, numpy to lists and numbers, enums and the
+    rest as text)."""
+    if hasattr(v, "to_dict"):
+        return _jsonable(v.to_dict())
     if isinstance(v, dict):
         return {str(k): _jsonable(x) for k, x in v.items()}
     if isinstance(v, (list, tuple)):
