@@ -348,7 +348,8 @@ def classify_victim(run: dict, k: int, events: list[dict] | None = None) -> dict
                            for d in decl]
     if approached and not declared:
         near = [(t, p) for t, p in bases if _hdist(p, xy) <= FIND_BASE_RADIUS_M]
-        out["time_first_within_1_5_m_s"] = near[0][0]
+        # None: only the trajectory between listens came that close (``victim_closest_m``)
+        out["time_first_within_1_5_m_s"] = near[0][0] if near else None
         near_recs = [rec for rec in run.get("listens", []) if _hdist(rec["pose"][:2], xy) <= FIND_BASE_RADIUS_M]
         calling = [rec for rec in near_recs if any(s["name"] == name and s.get("active") for s in rec["sources"])]
         heard = [rec for rec in calling if any(d.get("source") == name and d.get("azimuth_error_deg") is not None
