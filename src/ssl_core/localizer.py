@@ -35,8 +35,8 @@ from ssl_core.detection import Detection
 from ssl_core.ego_noise import EgoNoiseSuppressor
 from ssl_core.gcc_phat import LagSteering, band_bins, frame_spectra, summed_phat_cross_spectra
 from ssl_core.geometry import ArrayGeometry, get_array
-from ssl_core.near_field import Focus, FocusScan
 from ssl_core.grid import SphericalGrid, azimuth_elevation, make_grid, n_points_for_spacing
+from ssl_core.near_field import Focus, FocusScan
 from ssl_core.noise import NoiseFloor
 from ssl_core.peaks import local_maxima, neighbour_table
 from ssl_core.pooling import DirectionPool

@@ -20,6 +20,7 @@ from dataclasses import dataclass
 import numpy as np
 
 from ssl_core.geometry import ArrayGeometry
+from ssl_core.srp import SOUND_SPEED
 
 __all__ = ["Focus", "FocusScan", "DEFAULT_RANGES_M"]
 
@@ -45,7 +46,7 @@ class FocusScan:
 
     def __init__(self, geometry: ArrayGeometry, lag_rate: float, max_lag: int,
                  ranges_m: tuple[float, ...] = DEFAULT_RANGES_M, cone_rad: float = np.deg2rad(4.0),
-                 sound_speed: float = 343.0):
+                 sound_speed: float = SOUND_SPEED):
         if not ranges_m or min(ranges_m) <= 0:
             raise ValueError(f"ranges_m: expected positive ranges in m, got {ranges_m!r}")
         self.mics = np.asarray(geometry.positions, float)
