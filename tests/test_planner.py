@@ -7,7 +7,7 @@ import pytest
 
 from robot.coverage import ListeningCoverage
 from robot.occupancy import OccupancyConfig, OccupancyGrid
-from robot.planner import Planner, PlannerConfig
+from robot.planner import Planner, PlannerConfig, path_start
 from robot.sound_map import MapSource, SourceClass, SourceState
 
 
@@ -204,3 +204,17 @@ def test_paths_stay_within_the_margin_of_the_search_area():
     assert np.all((p.waypoints >= [area[0] - m, area[1] - m]) & (p.waypoints <= [area[2] + m, area[3] + m]))
     # A robot outside the margin (e.g. driven there by hand) still plans: the bound is not applied to it.
     assert pl.plan(g, (5.6, 1.5), (2.0, 1.5), _search=pl.distances(g, (5.6, 1.5), area)) is not None
+
+
+def test_path_start_cuts_the_polyline_at_the_step_length():
+    # an L-shaped path: 0.4 m east, then 1 m north; the first 0.6 m end 0.2 m up the second leg
+    legs, total = path_start((1.0, 1.0), [(1.0, 1.0), (1.4, 1.0), (1.4, 2.0)], 0.6)
+    assert total == pytest.approx(0.6)
+    assert len(legs) == 2
+    assert np.allclose(legs[0], (1.4, 1.0)) and np.allclose(legs[1], (1.4, 1.2))
+    # a path shorter than the step is driven whole; a repeated waypoint adds no leg
+    legs, total = path_start((0.0, 0.0), [(0.3, 0.4), (0.3, 0.4)], 0.6)
+    assert total == pytest.approx(0.5) and len(legs) == 1 and np.allclose(legs[0], (0.3, 0.4))
+    # standing on the goal: nothing to drive
+    legs, total = path_start((2.0, 2.0), [(2.0, 2.0)], 0.6)
+    assert legs == [] and total == 0.0

@@ -1,6 +1,8 @@
 """World-frame sound map: bearings from a drive past static sources, checked against the geometry put in."""
 from dataclasses import dataclass
 
+import math
+
 import numpy as np
 import pytest
 
@@ -66,6 +68,9 @@ def test_three_sources_within_0p3_m_despite_10pct_outliers(track_ids):
         assert np.linalg.norm(s.position[:2] - p[:2]) <= 3 * s.horizontal_sigma_m + 0.05
     # outliers do not become confirmed sources
     assert sum(s.n_listens >= 3 for s in m.sources) == 3
+    # the machine (no voice) is an interferer of the map, at its place; the callers are not
+    near = [[np.linalg.norm(xy - p[:2]) <= 0.3 for xy in m.interferers()] for p in SOURCES]
+    assert sum(near[1]) == 1 and not any(near[0]) and not any(near[2])
 
 
 def test_single_pose_gives_range_from_elevation_only():
@@ -171,3 +176,16 @@ def test_two_rays_crossing_beside_the_second_listen_stay_two_sources():
     assert len(m.sources) == 2
     for s in m.sources:
         assert np.linalg.norm(s.position[:2] - crossing) > 0.3
+
+
+def test_array_mount_bearing_to_a_world_point():
+    from robot.mount import ArrayMount
+    mount = ArrayMount(height_m=0.3)
+    # robot at (1, 1) facing +y: a point 1 m to the world's +x is on the robot's right (azimuth -90 deg), and
+    # 0.3 m below the array at 1 m range is 16.7 deg down
+    az, el = mount.bearing_to((1.0, 1.0, math.pi / 2), (2.0, 1.0, 0.0))
+    assert math.degrees(az) == pytest.approx(-90.0)
+    assert math.degrees(el) == pytest.approx(-math.degrees(math.atan2(0.3, 1.0)))
+    # straight behind: azimuth -180 deg (the wrap is [-pi, pi))
+    az, _ = mount.bearing_to((0.0, 0.0, 0.0), (-1.0, 0.0, 0.3))
+    assert az == pytest.approx(-math.pi)

@@ -6,6 +6,7 @@ field names are the keys. Units SI, angles in rad; positions in the odometry fra
 """
 from __future__ import annotations
 
+import math
 from dataclasses import dataclass, field, fields
 from enum import Enum, StrEnum
 from typing import Any, Self
@@ -127,6 +128,19 @@ class HeardPayload(Payload):
     @classmethod
     def from_dict(cls, d: dict[str, Any]) -> Self:
         return cls(**{**d, "candidates": [HeardCandidate.from_dict(c) for c in d["candidates"]]})
+
+    @property
+    def decision(self) -> Decision:
+        """HEARD with a candidate, else NO_SOURCE."""
+        return Decision.HEARD if self.candidates else Decision.NO_SOURCE
+
+    def describe(self) -> str:
+        """The listen in words (angles in degrees, array frame)."""
+        if not self.candidates:
+            return "no source detected" if not self.n_detections else "only ignored sources: " + "; ".join(self.ignored)
+        desc = "; ".join(f"#{c.source} {c.cls} az {math.degrees(c.azimuth):+.0f} deg el "
+                         f"{math.degrees(c.elevation):+.0f} deg voice {c.voice:.2f}" for c in self.candidates)
+        return desc + (f"; ignored: {'; '.join(self.ignored)}" if self.ignored else "")
 
 
 @dataclass(frozen=True)

@@ -23,3 +23,11 @@ class ArrayMount:
     def __post_init__(self) -> None:
         if not (isinstance(self.height_m, (int, float)) and math.isfinite(self.height_m) and self.height_m > 0):
             raise ValueError(f"ArrayMount.height_m: expected a height > 0 m, got {self.height_m!r}")
+
+    def bearing_to(self, pose, position) -> tuple[float, float]:
+        """Array-frame azimuth (CCW from the robot's forward) and elevation (up), rad, of the world point
+        ``position`` (x, y, z m) seen from the robot at ``pose`` (x m, y m, yaw rad), odometry frame."""
+        x, y, yaw = (float(v) for v in pose)
+        dx, dy = position[0] - x, position[1] - y
+        az = (math.atan2(dy, dx) - yaw + math.pi) % (2 * math.pi) - math.pi   # [-pi, pi)
+        return float(az), float(math.atan2(position[2] - self.height_m, math.hypot(dx, dy)))

@@ -29,7 +29,7 @@ from robot.coverage import ListeningCoverage
 from robot.occupancy import OccupancyGrid
 from robot.sound_map import MapSource
 
-__all__ = ["PlannerConfig", "Planner", "Plan", "grid_graph"]
+__all__ = ["PlannerConfig", "Planner", "Plan", "grid_graph", "path_start"]
 
 #: Neighbour offsets for a 16-connected grid (king + knight moves): path lengths within ~3 % of the
 #: Euclidean geodesic instead of ~8 % with 8 neighbours.
@@ -103,6 +103,23 @@ class PlannerConfig:
         need(self, self.explore_headings >= 4, "explore_headings", "an integer >= 4")
         need(self, self.frontier_reach_m > 0, "frontier_reach_m", "> 0 m")
         need(self, self.search_margin_m >= 0, "search_margin_m", ">= 0 m")
+
+
+def path_start(start, waypoints, length: float) -> tuple[list[np.ndarray], float]:
+    """The first ``length`` m of the polyline from ``start`` (x, y) through ``waypoints`` (k, 2), world m: the
+    end points of its legs (waypoints closer than 1 mm to the previous point skipped) and the length they cover."""
+    here = np.array(start, float)
+    legs, left = [], float(length)
+    for wp in np.asarray(waypoints, float):
+        d = float(np.hypot(*(wp - here)))
+        if d < 1e-3:
+            continue
+        take = min(d, left)
+        legs.append(here + (wp - here) * (take / d))
+        left, here = left - take, legs[-1]
+        if left <= 1e-3:
+            break
+    return legs, float(length) - left
 
 
 @dataclass(frozen=True)

@@ -42,12 +42,12 @@ from robot.mount import ArrayMount
 from robot.occupancy import MapMemoryError, OccupancyConfig, OccupancyGrid
 from robot.odometry import GyroFusionConfig, Odometry, TravelConfig, pose_at, wrap_angle
 from robot.options import Option, OptionKind, OptionsConfig, Timing, choose
-from robot.planner import Plan, Planner, PlannerConfig
+from robot.planner import Plan, Planner, PlannerConfig, path_start
 from robot.pursuit import PursuitConfig, Pursuits
 from robot.ranging import RangeLayout, RangeScans
 from robot.recovery import Recovery, RecoveryConfig
 from robot.rescue_config import FoundVictim, RescueConfig
-from robot.sound_map import DISTINCT_POSES_M, MapSource, SoundMap, SoundMapConfig, SourceClass, SourceState
+from robot.sound_map import DISTINCT_POSES_M, MapSource, SoundMap, SoundMapConfig, SourceState
 
 __all__ = ["RescueBehaviour", "RescueConfig", "FoundVictim", "Decision", "FindCriterion", "RescueEvent",
            "RescueState"]
@@ -185,7 +185,7 @@ class RescueBehaviour(Mission):
         self.motion.update_odometry(stationary=True)
         pose = self.pose
         assoc = self.map.update(res.evidence, pose, self.clock.now())
-        self.coverage.listened(pose[:2], self._machines())
+        self.coverage.listened(pose[:2], self.map.interferers())
         if self._spot_at is None or math.hypot(*(pose[:2] - self._spot_at[:2])) > DISTINCT_POSES_M \
                 or abs(wrap_angle(pose[2] - self._spot_at[2])) > math.radians(5.0):
             self._spot, self._spot_at = [], pose.copy()
@@ -198,7 +198,7 @@ class RescueBehaviour(Mission):
         target keeps its ``keep_factor``); else it ends here and the next cycle listens standing and decides."""
         pose = np.array(pose_at(trajectory, 0.5 * (trajectory[0, 0] + trajectory[-1, 0])))
         assoc = self.map.update(res.evidence, pose, float(trajectory[-1, 0]))
-        self.coverage.listened(pose[:2], self._machines())
+        self.coverage.listened(pose[:2], self.map.interferers())
         self._report(res, assoc, pose, "while driving: ")
         o = self._choose()
         return (o.kind, None if o.source is None else o.source.id) == self._doing
@@ -216,13 +216,7 @@ class RescueBehaviour(Mission):
             cands.append(HeardCandidate(sid, ev.azimuth, ev.elevation, ev.level_db, ev.speech_fraction,
                                         ev.voice_scan, s.cls.value, s.state.value))
         data = HeardPayload(res.n_detections, cands, ignored, pose.tolist())
-        if cands:
-            desc = "; ".join(f"#{c.source} {c.cls} az {math.degrees(c.azimuth):+.0f} deg el "
-                             f"{math.degrees(c.elevation):+.0f} deg voice {c.voice:.2f}" for c in cands)
-            self._emit(Decision.HEARD, prefix + desc + (f"; ignored: {'; '.join(ignored)}" if ignored else ""), data)
-        else:
-            self._emit(Decision.NO_SOURCE, prefix + ("no source detected" if not res.n_detections
-                       else "only ignored sources: " + "; ".join(ignored)), data)
+        self._emit(data.decision, prefix + data.describe(), data)
         return heard
 
     # -- found ----------------------------------------------------------------------
@@ -232,7 +226,7 @@ class RescueBehaviour(Mission):
         ``BASE_RADIUS_M`` of a victim within ``FIND_RADIUS_M`` of the estimate), most probable first. A source
         within reach that is not found now counts a miss (``robot.pursuit``)."""
         xy = tuple(float(v) for v in self.pose[:2])
-        machines = tuple(tuple(m) for m in self._machines())
+        machines = tuple(tuple(m) for m in self.map.interferers())
         found = tuple((v.position[0], v.position[1]) for v in self.victims)
         out = []
         for s in self.map.sources:
@@ -275,7 +269,7 @@ class RescueBehaviour(Mission):
         self._doing = (o.kind, None if s is None else s.id)
         if o.kind is OptionKind.APPROACH:
             self._set_target(s, o.plan)
-            az, el = self._bearing_to(s.position)
+            az, el = self.mount.bearing_to(self.pose, s.position)
             self._emit(Decision.TARGET, f"approach #{s.id}: {o.why}; {o.value * 60:.2f} victims/min",
                        TargetPayload(s.id, s.position.tolist(), s.horizontal_sigma_m, s.victim_probability, az, el,
                                      o.plan.length, o.plan.waypoints.tolist()))
@@ -315,18 +309,7 @@ class RescueBehaviour(Mission):
     def _follow(self, waypoints: np.ndarray, state: RescueState, decision: Decision, target: MapSource | None,
                 prefix: str = "") -> None:
         """Drive along ``waypoints`` (world m), at most ``step_m`` in all."""
-        here = self.pose[:2].copy()
-        legs, left = [], self.config.step_m
-        for wp in np.asarray(waypoints, float):
-            d = float(np.hypot(*(wp - here)))
-            if d < 1e-3:
-                continue
-            take = min(d, left)
-            legs.append(here + (wp - here) * (take / d))
-            left, here = left - take, legs[-1]
-            if left <= 1e-3:
-                break
-        total = self.config.step_m - left
+        legs, total = path_start(self.pose[:2], waypoints, self.config.step_m)
         if total < 0.02:
             self._emit(Decision.NO_TARGET, f"{prefix or 'at the goal'}: nothing to drive; listen again")
             return
@@ -375,15 +358,3 @@ class RescueBehaviour(Mission):
         self.state = RescueState.RECOVER
         self.recovery.after_contact(b, "while moving")
 
-    # -- helpers ----------------------------------------------------------------------
-    def _machines(self) -> list[np.ndarray]:
-        """World (x, y) of the mapped interferers: their sound masks the callers near them."""
-        return [s.position[:2] for s in self.map.sources
-                if s.cls is SourceClass.INTERFERER and s.state is not SourceState.FOUND]
-
-    def _bearing_to(self, position) -> tuple[float, float]:
-        """Array-frame azimuth and elevation (rad) of a world point from the current pose."""
-        x, y, yaw = self.pose
-        dx, dy = position[0] - x, position[1] - y
-        return float(wrap_angle(math.atan2(dy, dx) - yaw)), float(math.atan2(position[2] - self.mount.height_m,
-                                                                             math.hypot(dx, dy)))

@@ -447,6 +447,11 @@ class SoundMap:
                 out.append(s)
         return out
 
+    def interferers(self) -> list[np.ndarray]:
+        """World (x, y) m of the mapped sources classified interferer and not found: their sound masks the callers
+        near them."""
+        return [s.position[:2] for s in self.sources if s.cls is SourceClass.INTERFERER and s.state is not SourceState.FOUND]
+
     # -- writing ------------------------------------------------------------------------
     def update(self, evidence: Sequence[BearingEvidence], pose: Pose2D | Sequence[float], time: float
                ) -> list[tuple[BearingEvidence, int]]:
