@@ -55,6 +55,8 @@ NEW_SECTIONS = ("motion", "sound_map", "planner", "occupancy")
 
 
 # ----------------------------------------------------------------------------- worker side
+ORACLES = ("localization", "hearing")   # ssl_sim.runner.ORACLES (read by the workers, from the tree they run)
+
 def _scoring():
     """This tree's ``ssl_sim/scoring.py``, loaded by path: every code version is scored by the same definition
     (an older tree's runner scores by its own rules, which are not the ones compared here)."""
@@ -66,17 +68,19 @@ def _scoring():
     return mod
 
 
-def _one(path: str, seed: int, time_limit: float | None) -> dict:
+def _one(path: str, seed: int, time_limit: float | None, oracle: str = "") -> dict:
     """One run of whatever code version is on the path, driven as ``RescueRun.run`` does, but ended and scored by
     this tree's scoring (the run ends when every victim is *found* by its rules, the behaviour finishes or time is
-    up)."""
+    up). ``oracle``: "localization" gives the runner's localization oracle (``RescueRun(oracle_localization=True)``),
+    "hearing" that and the voice oracle (``oracle_voice=True``)."""
+    import ssl_sim.runner
     from robot.rescue import Decision
     from ssl_sim.runner import RescueRun
     from ssl_sim.scenario import load_scenario
     scoring = _scoring()
     t0 = time.process_time()
     sc = load_scenario(path).with_overrides(seed=None if seed < 0 else seed, time_limit_s=time_limit)
-    run = RescueRun(sc)
+    run = RescueRun(sc, **ssl_sim.runner.ORACLES[oracle]) if oracle else RescueRun(sc)
     n = run.n_victims
     victims_xy = [s.position[:2] for s in run.sources[:n]]
     judge = scoring.Judge(victims_xy, sc.time_limit_s)
@@ -121,8 +125,8 @@ def _one(path: str, seed: int, time_limit: float | None) -> dict:
             "position_errors_m": [round(judge.found[k].report_error_m, 4) for k in found]}
 
 
-def worker(paths: list[str], seeds: list[int], workers: int, out: str) -> None:
-    tasks = [(p, s, TIME_LIMITS.get(Path(p).stem)) for p in paths for s in seeds]
+def worker(paths: list[str], seeds: list[int], workers: int, out: str, oracle: str = "") -> None:
+    tasks = [(p, s, TIME_LIMITS.get(Path(p).stem), oracle) for p in paths for s in seeds]
     ctx = multiprocessing.get_context("spawn")
     with cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as ex:
         rows = list(ex.map(_one, *zip(*tasks)))
@@ -165,7 +169,8 @@ def _scenario_paths(tmp: Path, old: bool, only: list[str] | None = None, files: 
     return out
 
 
-def _start_version(src: Path, paths: list[str], seeds: list[int], workers: int, tmp: Path, tag: str, blas: str):
+def _start_version(src: Path, paths: list[str], seeds: list[int], workers: int, tmp: Path, tag: str, blas: str,
+                   oracle: str = ""):
     """Start one code version's runs in a worker process (OpenBLAS kernels ``blas``, '' = the CPU's own choice);
     returns (process, output file)."""
     out = tmp / f"{tag}-{blas or 'cpu'}.json"
@@ -174,7 +179,7 @@ def _start_version(src: Path, paths: list[str], seeds: list[int], workers: int, 
     if blas:
         env["OPENBLAS_CORETYPE"] = blas
     cmd = [sys.executable, __file__, "--worker", str(out), "--workers", str(workers),
-           "--seeds", ",".join(map(str, seeds)), "--paths", *paths]
+           "--seeds", ",".join(map(str, seeds)), "--paths", *paths] + (["--oracle", oracle] if oracle else [])
     return subprocess.Popen(cmd, env=env, cwd=str(ROOT)), out
 
 
@@ -270,13 +275,17 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--blas", default=None,
                     help="comma list of OPENBLAS_CORETYPE kernels to run every run under ('' = the CPU's own "
                          "choice; default $OPENBLAS_CORETYPE, else Haswell where the CPU has AVX2 and FMA)")
+    ap.add_argument("--oracle", choices=ORACLES, default="",
+                    help="an ablation of this tree's runs: 'localization' gives the behaviour the true directions of "
+                         "the sounding sources instead of SRP-PHAT's detections, 'hearing' also the truth's voice "
+                         "evidence (ssl_sim.runner.RescueRun's oracle_localization, oracle_voice)")
     ap.add_argument("--worker", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--paths", nargs="*", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
     seeds = (list(range(*map(int, args.seeds.split(":")))) if ":" in args.seeds
              else [int(s) for s in args.seeds.split(",")])
     if args.worker:
-        worker(args.paths, seeds, args.workers, args.worker)
+        worker(args.paths, seeds, args.workers, args.worker, args.oracle)
         return 0
     # An OPENBLAS_CORETYPE the caller set is kept, not replaced by the default.
     kernels = check_kernels(args.blas.split(",") if args.blas is not None
@@ -317,7 +326,8 @@ def main(argv: list[str] | None = None) -> int:
         try:
             for blas in ([] if args.tables_only else kernels):
                 # Both versions at once (each with ``workers`` processes): the same seeds, scenario files, kernels.
-                jobs = {"new": _start_version(ROOT / "src", new_paths, seeds, args.workers, tmp, "new", blas)}
+                jobs = {"new": _start_version(ROOT / "src", new_paths, seeds, args.workers, tmp, "new", blas,
+                                              args.oracle)}
                 if base_src is not None:
                     jobs["old"] = _start_version(base_src, old_paths, seeds, args.workers, tmp, "old", blas)
                 for tag, job in jobs.items():

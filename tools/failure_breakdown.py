@@ -104,12 +104,13 @@ def _jsonable(v):
     return str(v)
 
 
-def run_one(index: int, out_dir: str, time_limit_s: float | None = None) -> str:
+def run_one(index: int, out_dir: str, time_limit_s: float | None = None, oracle: str = "") -> str:
     """Run train scenario ``index`` to its time limit; write ``out_dir/train_NNN/results.json`` with the run's
-    typed events (``event_log``) and the sound map after every listen (``map_log``) added."""
+    typed events (``event_log``) and the sound map after every listen (``map_log``) added. ``oracle``: an ablation
+    of the robot's hearing by name (``ssl_sim.runner.ORACLES``)."""
     os.nice(10)
     from ssl_sim import suite
-    from ssl_sim.runner import RescueRun, write_results
+    from ssl_sim.runner import ORACLES, RescueRun, write_results
     sc = suite.generate("train", index)
     if time_limit_s is not None:
         sc = sc.with_overrides(time_limit_s=time_limit_s)
@@ -146,7 +147,7 @@ def run_one(index: int, out_dir: str, time_limit_s: float | None = None) -> str:
                                     for s in self.sources]
             return res
 
-    run = _Run(sc)
+    run = _Run(sc, **ORACLES[oracle]) if oracle else _Run(sc)
     try:
         res = run.run()
     except Exception as exc:   # the simulator refused a state (a microphone driven inside an obstacle): keep
@@ -158,12 +159,12 @@ def run_one(index: int, out_dir: str, time_limit_s: float | None = None) -> str:
     return str(out / "results.json")
 
 
-def run_many(indices: list[int], out_dir: str, workers: int = 2) -> list[str]:
+def run_many(indices: list[int], out_dir: str, workers: int = 2, oracle: str = "") -> list[str]:
     """Run train scenarios ``indices`` in a pool of ``workers`` processes (each at nice 10); their results paths."""
     ctx = mp.get_context("spawn")
     paths = []
     with cf.ProcessPoolExecutor(workers, mp_context=ctx) as ex:
-        futs = {ex.submit(run_one, i, out_dir): i for i in indices}
+        futs = {ex.submit(run_one, i, out_dir, None, oracle): i for i in indices}
         for f in cf.as_completed(futs):
             paths.append(f.result())
             print(f"done train {futs[f]}: {paths[-1]}", flush=True)
@@ -581,11 +582,14 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", default="out/failure_breakdown", help="where the runs' results.json go")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--json", help="write the per-victim classification and the tables here")
+    ap.add_argument("--oracle", choices=("localization", "hearing"), default="",
+                    help="an ablation of the robot's hearing (ssl_sim.runner.ORACLES): the truth's directions, "
+                         "and with 'hearing' also its voice evidence")
     a = ap.parse_args(argv)
     if a.runs is None:
         if a.count < 1 or a.start < 0:
             ap.error(f"--count must be >= 1 and --start >= 0, got {a.count} and {a.start}")
-        run_many(list(range(a.start, a.start + a.count)), a.out, a.workers)
+        run_many(list(range(a.start, a.start + a.count)), a.out, a.workers, a.oracle)
     try:
         rows = [classify_run(r) for r in load_runs(a.runs or a.out)]
     except (FileNotFoundError, ValueError) as exc:

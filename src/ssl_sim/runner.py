@@ -59,7 +59,7 @@ from robot.rescue import RescueBehaviour
 from robot.vad import ModelError
 from ssl_core.geometry import cube8
 from ssl_core.health import HealthConfig, MicHealth
-from ssl_core.localizer import Localizer
+from ssl_core.localizer import Detection, Localizer
 from ssl_sim.acoustics import AcousticSimulator
 from ssl_sim.backends import SimAudioSource, array_frame_directions
 from ssl_sim.calibration import ego_noise_suppressor
@@ -145,12 +145,13 @@ class _TimedDrive(SimDriveBase):
 class _RecordingLocalizer:
     """The real Localizer, timed, reporting each result (the behaviour sees the same object API)."""
 
-    def __init__(self, localizer: Localizer, on_result) -> None:
+    def __init__(self, localizer: Localizer, on_result, oracle=None) -> None:
         self._loc = localizer
         self.geometry = localizer.geometry
         self.config = localizer.config
         self.coarse_grid = localizer.coarse_grid
         self.on_result = on_result
+        self.oracle = oracle   # (result, samples) -> the result with the truth's detections (an ablation)
         self.seconds = 0.0
         self.cpu_s = 0.0
 
@@ -163,6 +164,8 @@ class _RecordingLocalizer:
         res = self._loc.locate(samples, **kw)
         self.seconds += time.perf_counter() - t
         self.cpu_s += time.process_time() - c
+        if self.oracle is not None:
+            res = self.oracle(res, samples)
         self.on_result(res, samples.shape[-1])
         return res
 
@@ -187,6 +190,12 @@ def _unit(az: float, el: float) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- the run
+#: Ablations of the robot's hearing by name (``benchmarks/bench_rescue.py --oracle``, ``tools/failure_breakdown.py
+#: --oracle``): the ``RescueRun`` switches each sets.
+ORACLES: dict[str, dict[str, bool]] = {"localization": {"oracle_localization": True},
+                                       "hearing": {"oracle_localization": True, "oracle_voice": True}}
+
+
 class RescueRun:
     """One scenario run with ``seed`` (default: the scenario's); ``run()`` returns the results dict.
 
@@ -195,7 +204,8 @@ class RescueRun:
     without them, which learns obstacles by touch alone)."""
 
     def __init__(self, scenario: Scenario, seed: int | None = None, logger: RunLogger | None = None,
-                 world: World | None = None, range_layout: RangeLayout | None = RangeLayout()) -> None:
+                 world: World | None = None, range_layout: RangeLayout | None = RangeLayout(),
+                 oracle_localization: bool = False, oracle_voice: bool = False) -> None:
         t0 = time.perf_counter()
         self.scenario = sc = scenario if seed is None else scenario.with_overrides(seed=seed)
         self.seed = sc.seed
@@ -225,7 +235,8 @@ class RescueRun:
         if sc.ego_noise is not None and sc.behaviour.listen_while_driving:
             ego = ego_noise_suppressor(sc.ego_noise, sc.localizer.fs, robot.config.array_height)
         localizer = Localizer(cube8(), sc.localizer, ego_noise=ego)
-        self.localizer = _RecordingLocalizer(localizer, self._on_result)
+        self.localizer = _RecordingLocalizer(localizer, self._on_result,
+                                             self._oracle_detections if oracle_localization else None)
         # The robot's microphone health monitor, as on the real robot (faults go to rerun and results).
         self.mic_health = MonitoredAudio(self.audio, MicHealth(cube8(), HealthConfig(fs=sc.localizer.fs)),
                                          localizer, on_change=self._on_mic_faults)
@@ -237,7 +248,7 @@ class RescueRun:
         self.mount = ArrayMount(height_m=robot.config.array_height)
         self.behaviour = RescueBehaviour(self.mic_health, self.drive, self.clock, self.localizer, sc.behaviour,
                                          params=robot.params, mount=self.mount, start_pose=world.robot_start,
-                                         **stages)
+                                         speech=self._oracle_speech if oracle_voice else None, **stages)
         self.paths = FreeSpaceGraph(world)
         self.judge = Judge([s.position for s in self.sources[: self.n_victims]], sc.time_limit_s)
         # truth bookkeeping
@@ -320,12 +331,11 @@ class RescueRun:
                 return (poses[k] if poses else self.robot.array_pose()), (start, int(n_samples))
         return self.robot.array_pose(), (start, int(n_samples))
 
-    @_bookkeeping
-    def _on_result(self, res, n_samples: int) -> None:
-        t = self.robot.time
-        pose = self.robot.pose()
+    def _sources_heard(self, n_samples: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
+        """Every source's azimuth, elevation (rad, array frame) and distance (m) at the middle of the window of the
+        last ``n_samples`` samples read (a parked robot creeps slightly; a driving one moves), and the fraction of
+        its 10 ms frames in that window in which it sounds (its own signal's RMS above 0.05 full scale)."""
         pos = np.array([s.position for s in self.sources]).reshape(-1, 3)
-        # Truth at the middle of the window just heard (a parked robot creeps slightly; a driving one moves).
         (origin, rot), window = self._window(n_samples)
         az, el, dist = array_frame_directions(origin, rot, pos)
         active = np.ones(len(self.sources))
@@ -335,6 +345,41 @@ class RescueRun:
                 x = s.signal.render(n0, n)
                 fr = x[: n // 160 * 160].reshape(-1, 160)
                 active[k] = float(np.mean(np.sqrt(np.mean(fr**2, axis=1)) > 0.05)) if fr.size else 0.0
+        return az, el, dist, active
+
+    @_bookkeeping
+    def _oracle_detections(self, res, samples):
+        """``res`` with the truth's detections instead of SRP-PHAT's: one per source sounding in >= 10 % of the
+        window's frames, whatever its level, at its true direction (array frame), strongest beam first. Its power and
+        level are the SRP-PHAT peak's and the delay-and-sum beam's within 3 deg of that azimuth (the power at least
+        the behaviour's ``min_power``, so that none is ignored), its significance infinite. An ablation
+        (``oracle_localization``): what the behaviour does with perfect localization."""
+        az, el, _, active = self._sources_heard(samples.shape[-1])
+        floor = self.scenario.behaviour.min_power
+        dets = []
+        for k in np.flatnonzero(active >= 0.1):
+            peak = self.localizer.peak_in_sector(res, float(az[k]), math.radians(3.0), samples)
+            power, level = (max(peak.power, floor), peak.level_db) if peak is not None else (floor, res.level_db)
+            dets.append(Detection(float(az[k]), float(el[k]), _unit(az[k], el[k]), float(power), float(level),
+                                  math.inf))
+        dets.sort(key=lambda d: -d.level_db)
+        return replace(res, detections=dets)
+
+    @_bookkeeping
+    def _oracle_speech(self, samples, detection, direction) -> float:
+        """The behaviour's voice evidence from the truth (``oracle_voice``, an ablation): a beam toward a victim who
+        sounds in the window (>= 10 % of its frames) within 5 deg of ``direction`` (unit vector, array frame) is all
+        speech (fraction 1), any other beam none."""
+        az, el, _, active = self._sources_heard(np.shape(samples)[-1])
+        u = np.asarray(direction, float)
+        return float(any(active[k] >= 0.1 and float(u @ _unit(az[k], el[k])) >= math.cos(math.radians(5.0))
+                         for k in range(self.n_victims)))
+
+    @_bookkeeping
+    def _on_result(self, res, n_samples: int) -> None:
+        t = self.robot.time
+        pose = self.robot.pose()
+        az, el, dist, active = self._sources_heard(n_samples)
         truth = [{"name": s.name, "kind": s.kind, "azimuth_deg": _deg(a), "elevation_deg": _deg(e),
                   "distance_m": _r(d), "active_fraction": _r(f, 2), "active": bool(f >= 0.1),
                   "direction": _unit(a, e)} for s, a, e, d, f in zip(self.sources, az, el, dist, active)]
