@@ -55,7 +55,7 @@ NEW_SECTIONS = ("motion", "sound_map", "planner", "occupancy")
 
 
 # ----------------------------------------------------------------------------- worker side
-ORACLES = ("localization", "hearing")   # ssl_sim.runner.ORACLES (read by the workers, from the tree they run)
+ORACLES = ("no_false_detections", "localization", "hearing")   # ssl_sim.runner.ORACLES (the workers read it)
 
 def _scoring():
     """This tree's ``ssl_sim/scoring.py``, loaded by path: every code version is scored by the same definition
@@ -276,9 +276,10 @@ def main(argv: list[str] | None = None) -> int:
                     help="comma list of OPENBLAS_CORETYPE kernels to run every run under ('' = the CPU's own "
                          "choice; default $OPENBLAS_CORETYPE, else Haswell where the CPU has AVX2 and FMA)")
     ap.add_argument("--oracle", choices=ORACLES, default="",
-                    help="an ablation of this tree's runs: 'localization' gives the behaviour the true directions of "
-                         "the sounding sources instead of SRP-PHAT's detections, 'hearing' also the truth's voice "
-                         "evidence (ssl_sim.runner.RescueRun's oracle_localization, oracle_voice)")
+                    help="an ablation of this tree's runs: 'no_false_detections' drops SRP-PHAT's detections more "
+                         "than 10 deg from every sounding source, 'localization' gives the behaviour the true "
+                         "directions of the sounding sources instead, 'hearing' also the truth's voice evidence "
+                         "(ssl_sim.runner.ORACLES)")
     ap.add_argument("--worker", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--paths", nargs="*", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)

@@ -7,17 +7,17 @@ from ssl_sim.runner import RescueRun
 from ssl_sim.scenario import load_scenario
 
 
-def _listens(oracle: bool) -> list[dict]:
-    sc = load_scenario("generator_louder").with_overrides(time_limit_s=12.0)
+def _listens(scenario: str = "generator_louder", **ablation) -> list[dict]:
+    sc = load_scenario(scenario).with_overrides(time_limit_s=15.0)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
-        run = RescueRun(sc, seed=1, oracle_localization=oracle)
+        run = RescueRun(sc, seed=1, **ablation)
     run.run()
     return run.listens
 
 
 def test_oracle_detects_every_sounding_source_at_its_true_direction():
-    listens = _listens(oracle=True)
+    listens = _listens(oracle_localization=True)
     assert listens
     for rec in listens:
         sounding = sorted(s["name"] for s in rec["sources"] if s["active"])
@@ -28,9 +28,17 @@ def test_oracle_detects_every_sounding_source_at_its_true_direction():
 
 
 def test_without_the_oracle_the_same_listens_are_srp_phat_detections():
-    errs = [d["error_deg"] for rec in _listens(oracle=False) for d in rec["detections"]]
+    errs = [d["error_deg"] for rec in _listens() for d in rec["detections"]]
     # the real localizer: errors of a few degrees, never exactly zero
     assert errs and min(errs) > 0.01 and np.median(errs) < 15.0
+
+
+def test_dropping_false_detections_keeps_srp_phat_directions_near_a_sounding_source_only():
+    # beside the pump some detections point at none of the sounding sources (reflections, the pump's lobes)
+    errs = [d["error_deg"] for rec in _listens("dense_pump") for d in rec["detections"]]
+    assert max(errs) > 10.0
+    kept = [d["error_deg"] for rec in _listens("dense_pump", drop_false_detections=True) for d in rec["detections"]]
+    assert kept and max(kept) <= 10.0 and min(kept) > 0.01
 
 
 def test_voice_oracle_hears_speech_in_the_victims_beams_only():

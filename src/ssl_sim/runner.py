@@ -192,7 +192,8 @@ def _unit(az: float, el: float) -> np.ndarray:
 # ----------------------------------------------------------------------------- the run
 #: Ablations of the robot's hearing by name (``benchmarks/bench_rescue.py --oracle``, ``tools/failure_breakdown.py
 #: --oracle``): the ``RescueRun`` switches each sets.
-ORACLES: dict[str, dict[str, bool]] = {"localization": {"oracle_localization": True},
+ORACLES: dict[str, dict[str, bool]] = {"no_false_detections": {"drop_false_detections": True},
+                                       "localization": {"oracle_localization": True},
                                        "hearing": {"oracle_localization": True, "oracle_voice": True}}
 
 
@@ -205,7 +206,8 @@ class RescueRun:
 
     def __init__(self, scenario: Scenario, seed: int | None = None, logger: RunLogger | None = None,
                  world: World | None = None, range_layout: RangeLayout | None = RangeLayout(),
-                 oracle_localization: bool = False, oracle_voice: bool = False) -> None:
+                 oracle_localization: bool = False, oracle_voice: bool = False,
+                 drop_false_detections: bool = False) -> None:
         t0 = time.perf_counter()
         self.scenario = sc = scenario if seed is None else scenario.with_overrides(seed=seed)
         self.seed = sc.seed
@@ -236,7 +238,8 @@ class RescueRun:
             ego = ego_noise_suppressor(sc.ego_noise, sc.localizer.fs, robot.config.array_height)
         localizer = Localizer(cube8(), sc.localizer, ego_noise=ego)
         self.localizer = _RecordingLocalizer(localizer, self._on_result,
-                                             self._oracle_detections if oracle_localization else None)
+                                             self._oracle_detections if oracle_localization
+                                             else self._true_detections if drop_false_detections else None)
         # The robot's microphone health monitor, as on the real robot (faults go to rerun and results).
         self.mic_health = MonitoredAudio(self.audio, MicHealth(cube8(), HealthConfig(fs=sc.localizer.fs)),
                                          localizer, on_change=self._on_mic_faults)
@@ -364,6 +367,16 @@ class RescueRun:
                                   math.inf))
         dets.sort(key=lambda d: -d.level_db)
         return replace(res, detections=dets)
+
+    @_bookkeeping
+    def _true_detections(self, res, samples):
+        """``res`` without its false detections (``drop_false_detections``, an ablation): those more than 10 deg
+        from every source sounding in the window (>= 10 % of its frames). What SRP-PHAT misses stays missed."""
+        az, el, _, active = self._sources_heard(samples.shape[-1])
+        dirs = np.array([_unit(az[k], el[k]) for k in np.flatnonzero(active >= 0.1)]).reshape(-1, 3)
+        cos = math.cos(math.radians(10.0))
+        return replace(res, detections=[d for d in res.detections
+                                        if len(dirs) and float(np.max(dirs @ np.asarray(d.direction, float))) >= cos])
 
     @_bookkeeping
     def _oracle_speech(self, samples, detection, direction) -> float:
