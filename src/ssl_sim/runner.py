@@ -151,7 +151,7 @@ class _RecordingLocalizer:
         self.config = localizer.config
         self.coarse_grid = localizer.coarse_grid
         self.on_result = on_result
-        self.oracle = oracle   # (result, samples) -> the result with the truth's detections (an ablation)
+        self.oracle = oracle   # (result, samples) -> the result the behaviour sees instead (an ablation)
         self.seconds = 0.0
         self.cpu_s = 0.0
 
@@ -202,7 +202,13 @@ class RescueRun:
 
     ``world``: the run's World if already built (``scenario.world(seed)``; sweeps build it on the
     client so that workers need no scene files). ``range_layout``: the robot's range sensors (None: a robot
-    without them, which learns obstacles by touch alone)."""
+    without them, which learns obstacles by touch alone).
+
+    Ablations of the robot's hearing (``ORACLES`` names them; the robot itself is unchanged): ``oracle_localization``
+    replaces SRP-PHAT's detections by the true directions of the sources sounding in each listen
+    (``_oracle_detections``), ``drop_false_detections`` drops those of no sounding source (``_true_detections``),
+    ``oracle_voice`` replaces the VAD's voice evidence by the truth (``_oracle_speech``; the robot's voice scan is
+    then off, as with any ``speech`` given to the behaviour)."""
 
     def __init__(self, scenario: Scenario, seed: int | None = None, logger: RunLogger | None = None,
                  world: World | None = None, range_layout: RangeLayout | None = RangeLayout(),
