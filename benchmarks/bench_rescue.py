@@ -55,7 +55,8 @@ NEW_SECTIONS = ("motion", "sound_map", "planner", "occupancy")
 
 
 # ----------------------------------------------------------------------------- worker side
-ORACLES = ("no_false_detections", "localization", "hearing")   # ssl_sim.runner.ORACLES (the workers read it)
+ORACLE_NAMES = ("no_false_detections", "localization", "hearing")   # ssl_sim.runner.ORACLES, in the tree run
+
 
 def _scoring():
     """This tree's ``ssl_sim/scoring.py``, loaded by path: every code version is scored by the same definition
@@ -71,16 +72,14 @@ def _scoring():
 def _one(path: str, seed: int, time_limit: float | None, oracle: str = "") -> dict:
     """One run of whatever code version is on the path, driven as ``RescueRun.run`` does, but ended and scored by
     this tree's scoring (the run ends when every victim is *found* by its rules, the behaviour finishes or time is
-    up). ``oracle``: "localization" gives the runner's localization oracle (``RescueRun(oracle_localization=True)``),
-    "hearing" that and the voice oracle (``oracle_voice=True``)."""
-    import ssl_sim.runner
+    up). ``oracle``: an ablation of the robot's hearing by name (``ssl_sim.runner.ORACLES``), '' for none."""
     from robot.rescue import Decision
-    from ssl_sim.runner import RescueRun
+    from ssl_sim.runner import ORACLES, RescueRun
     from ssl_sim.scenario import load_scenario
     scoring = _scoring()
     t0 = time.process_time()
     sc = load_scenario(path).with_overrides(seed=None if seed < 0 else seed, time_limit_s=time_limit)
-    run = RescueRun(sc, **ssl_sim.runner.ORACLES[oracle]) if oracle else RescueRun(sc)
+    run = RescueRun(sc, **ORACLES[oracle]) if oracle else RescueRun(sc)
     n = run.n_victims
     victims_xy = [s.position[:2] for s in run.sources[:n]]
     judge = scoring.Judge(victims_xy, sc.time_limit_s)
@@ -275,7 +274,7 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--blas", default=None,
                     help="comma list of OPENBLAS_CORETYPE kernels to run every run under ('' = the CPU's own "
                          "choice; default $OPENBLAS_CORETYPE, else Haswell where the CPU has AVX2 and FMA)")
-    ap.add_argument("--oracle", choices=ORACLES, default="",
+    ap.add_argument("--oracle", choices=ORACLE_NAMES, default="",
                     help="an ablation of this tree's runs: 'no_false_detections' drops SRP-PHAT's detections more "
                          "than 10 deg from every sounding source, 'localization' gives the behaviour the true "
                          "directions of the sounding sources instead, 'hearing' also the truth's voice evidence "
