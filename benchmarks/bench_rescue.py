@@ -74,12 +74,16 @@ def _one(path: str, seed: int, time_limit: float | None, oracle: str = "") -> di
     this tree's scoring (the run ends when every victim is *found* by its rules, the behaviour finishes or time is
     up). ``oracle``: an ablation of the robot's hearing by name (``ssl_sim.runner.ORACLES``), '' for none."""
     from robot.rescue import Decision
-    from ssl_sim.runner import ORACLES, RescueRun
+    from ssl_sim.runner import RescueRun
     from ssl_sim.scenario import load_scenario
     scoring = _scoring()
     t0 = time.process_time()
     sc = load_scenario(path).with_overrides(seed=None if seed < 0 else seed, time_limit_s=time_limit)
-    run = RescueRun(sc, **ORACLES[oracle]) if oracle else RescueRun(sc)
+    if oracle:   # only then: an older tree (a baseline) has no ablations
+        from ssl_sim.runner import ORACLES
+        run = RescueRun(sc, **ORACLES[oracle])
+    else:
+        run = RescueRun(sc)
     n = run.n_victims
     victims_xy = [s.position[:2] for s in run.sources[:n]]
     judge = scoring.Judge(victims_xy, sc.time_limit_s)
