@@ -7,24 +7,37 @@ from ssl_sim.runner import RescueRun
 from ssl_sim.scenario import load_scenario
 
 
-def _listens(scenario: str = "generator_louder", **ablation) -> list[dict]:
+def _run(scenario: str = "generator_louder", **ablation) -> RescueRun:
     sc = load_scenario(scenario).with_overrides(time_limit_s=15.0)
     with warnings.catch_warnings():
         warnings.simplefilter("ignore")
         run = RescueRun(sc, seed=1, **ablation)
     run.run()
-    return run.listens
+    return run
+
+
+def _listens(scenario: str = "generator_louder", **ablation) -> list[dict]:
+    return _run(scenario, **ablation).listens
 
 
 def test_oracle_detects_every_sounding_source_at_its_true_direction():
-    listens = _listens(oracle_localization=True)
-    assert listens
-    for rec in listens:
+    run = _run(oracle_localization=True)
+    assert run.listens
+    where = {s.name: np.asarray(s.position, float) for s in run.sources}
+    h = run.robot.config.array_height   # the array's centre, on the robot's vertical axis
+    for rec in run.listens:
         sounding = sorted(s["name"] for s in rec["sources"] if s["active"])
-        # one detection per sounding source, each at that source (the runner matches detections to the truth by
-        # the geometry of the array's pose at the window's middle, independently of the oracle)
+        # one detection per sounding source
         assert sorted(d["source"] for d in rec["detections"]) == sounding
-        assert all(d["error_deg"] <= 0.01 for d in rec["detections"])
+        # at that source's direction from the robot's recorded pose (plane geometry, not the runner's own truth;
+        # the pose is rounded to 1 mm and the parked robot creeps by less than a millimetre)
+        x, y, yaw = rec["pose"]
+        for d in rec["detections"]:
+            p = where[d["source"]]
+            az = np.degrees(np.arctan2(p[1] - y, p[0] - x) - yaw)
+            el = np.degrees(np.arctan2(p[2] - h, np.hypot(p[0] - x, p[1] - y)))
+            assert abs((d["azimuth_deg"] - az + 180.0) % 360.0 - 180.0) <= 0.1
+            assert abs(d["elevation_deg"] - el) <= 0.2
 
 
 def test_without_the_oracle_the_same_listens_are_srp_phat_detections():

@@ -582,7 +582,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--out", default="out/failure_breakdown", help="where the runs' results.json go")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--json", help="write the per-victim classification and the tables here")
-    ap.add_argument("--oracle", choices=("no_false_detections", "localization", "hearing"), default="",
+    from ssl_sim.runner import ORACLES
+    ap.add_argument("--oracle", choices=tuple(ORACLES), default="",
                     help="an ablation of the robot's hearing (ssl_sim.runner.ORACLES): SRP-PHAT's detections of no "
                          "sounding source dropped, the truth's directions, and with 'hearing' also its voice evidence")
     a = ap.parse_args(argv)

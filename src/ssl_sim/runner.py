@@ -190,6 +190,9 @@ def _unit(az: float, el: float) -> np.ndarray:
 
 
 # ----------------------------------------------------------------------------- the run
+#: A source sounds in a window when its own signal does in at least this share of the window's 10 ms frames.
+SOUNDING_FRACTION = 0.1
+
 #: Ablations of the robot's hearing by name (``benchmarks/bench_rescue.py --oracle``, ``tools/failure_breakdown.py
 #: --oracle``): the ``RescueRun`` switches each sets.
 ORACLES: dict[str, dict[str, bool]] = {"no_false_detections": {"drop_false_detections": True},
@@ -358,15 +361,15 @@ class RescueRun:
 
     @_bookkeeping
     def _oracle_detections(self, res, samples):
-        """``res`` with the truth's detections instead of SRP-PHAT's: one per source sounding in >= 10 % of the
-        window's frames, whatever its level, at its true direction (array frame), strongest beam first. Its power and
-        level are the SRP-PHAT peak's and the delay-and-sum beam's within 3 deg of that azimuth (the power at least
-        the behaviour's ``min_power``, so that none is ignored), its significance infinite. An ablation
+        """``res`` with the truth's detections instead of SRP-PHAT's: one per source sounding in the window
+        (``SOUNDING_FRACTION``), whatever its level, at its true direction (array frame), strongest beam first. Its
+        power and level are the SRP-PHAT peak's and the delay-and-sum beam's within 3 deg of that azimuth (the power
+        at least the behaviour's ``min_power``, so that none is ignored), its significance infinite. An ablation
         (``oracle_localization``): what the behaviour does with perfect localization."""
         az, el, _, active = self._sources_heard(samples.shape[-1])
         floor = self.scenario.behaviour.min_power
         dets = []
-        for k in np.flatnonzero(active >= 0.1):
+        for k in np.flatnonzero(active >= SOUNDING_FRACTION):
             peak = self.localizer.peak_in_sector(res, float(az[k]), math.radians(3.0), samples)
             power, level = (max(peak.power, floor), peak.level_db) if peak is not None else (floor, res.level_db)
             dets.append(Detection(float(az[k]), float(el[k]), _unit(az[k], el[k]), float(power), float(level),
@@ -377,9 +380,9 @@ class RescueRun:
     @_bookkeeping
     def _true_detections(self, res, samples):
         """``res`` without its false detections (``drop_false_detections``, an ablation): those more than 10 deg
-        from every source sounding in the window (>= 10 % of its frames). What SRP-PHAT misses stays missed."""
+        from every source sounding in the window (``SOUNDING_FRACTION``). What SRP-PHAT misses stays missed."""
         az, el, _, active = self._sources_heard(samples.shape[-1])
-        dirs = np.array([_unit(az[k], el[k]) for k in np.flatnonzero(active >= 0.1)]).reshape(-1, 3)
+        dirs = np.array([_unit(az[k], el[k]) for k in np.flatnonzero(active >= SOUNDING_FRACTION)]).reshape(-1, 3)
         cos = math.cos(math.radians(10.0))
         return replace(res, detections=[d for d in res.detections
                                         if len(dirs) and float(np.max(dirs @ np.asarray(d.direction, float))) >= cos])
@@ -387,11 +390,11 @@ class RescueRun:
     @_bookkeeping
     def _oracle_speech(self, samples, detection, direction) -> float:
         """The behaviour's voice evidence from the truth (``oracle_voice``, an ablation): a beam toward a victim who
-        sounds in the window (>= 10 % of its frames) within 5 deg of ``direction`` (unit vector, array frame) is all
+        sounds in the window (``SOUNDING_FRACTION``) within 5 deg of ``direction`` (unit vector, array frame) is all
         speech (fraction 1), any other beam none."""
         az, el, _, active = self._sources_heard(np.shape(samples)[-1])
-        u = np.asarray(direction, float)
-        return float(any(active[k] >= 0.1 and float(u @ _unit(az[k], el[k])) >= math.cos(math.radians(5.0))
+        u, cos = np.asarray(direction, float), math.cos(math.radians(5.0))
+        return float(any(active[k] >= SOUNDING_FRACTION and float(u @ _unit(az[k], el[k])) >= cos
                          for k in range(self.n_victims)))
 
     @_bookkeeping
@@ -400,7 +403,7 @@ class RescueRun:
         pose = self.robot.pose()
         az, el, dist, active = self._sources_heard(n_samples)
         truth = [{"name": s.name, "kind": s.kind, "azimuth_deg": _deg(a), "elevation_deg": _deg(e),
-                  "distance_m": _r(d), "active_fraction": _r(f, 2), "active": bool(f >= 0.1),
+                  "distance_m": _r(d), "active_fraction": _r(f, 2), "active": bool(f >= SOUNDING_FRACTION),
                   "direction": _unit(a, e)} for s, a, e, d, f in zip(self.sources, az, el, dist, active)]
         candidates = [k for k, s in enumerate(truth) if s["active"]] or list(range(len(truth)))
         dets = []
