@@ -152,3 +152,41 @@ def test_point_major_table_gives_the_pair_major_power():
         assert np.array_equal(point_major.power(gcc, cols), pair_major.power(gcc, cols))
     rev = np.ascontiguousarray(gcc[:, ::-1])
     assert np.array_equal(point_major.power(rev, np.array([17])), pair_major.power(rev, np.array([17])))
+
+
+# ------------------------------------------------------------------ rendering and the whole-recording map
+def test_rendered_sources_equal_the_direct_convolution():
+    """The sources' pressure (FFT convolution at a 5-smooth length, for speed) equals the time-domain convolution
+    of each source's signal with its room impulse response, sample n at t = n / fs."""
+    world = World(room=Room((6.0, 5.0, 2.8)), obstacles=(Box((3.0, 2.5, 0.4), (0.8, 0.6, 0.8)),),
+                  victims=(VictimSite((4.5, 3.5, 0.3)),))
+    srcs = [SoundSource((4.5, 3.5, 0.3), ShapedNoise(FS, 2, "pink"), 65.0),
+            SoundSource((1.2, 4.0, 1.0), ShapedNoise(FS, 5, "white"), 60.0)]
+    sim = AcousticSimulator(world, AcousticConfig(seed=1, rt60_s=0.3, ism_order=1, ambient=None), srcs)
+    mics = _cube((1.5, 1.5, 0.5))
+    n0, n = 3000, 2500
+    got = sim.pressure(mics, n0, n)
+    rirs = sim.impulse_responses(mics)            # (S, M, L), sample 0 = N_PRE samples before emission
+    L, pre = rirs.shape[-1], sim.N_PRE
+    want = np.zeros((8, n))
+    for k, s in enumerate(srcs):
+        x = s.signal.render(n0 + pre - L + 1, n + L - 1) * s.pressure_at_1m
+        for m in range(8):
+            want[m] += np.convolve(x, rirs[k, m], mode="valid")
+    assert np.abs(want).max() > 1e-3
+    np.testing.assert_allclose(got, want, rtol=0, atol=1e-9 * np.abs(want).max())
+
+
+def test_whole_recording_map_equals_the_summed_search_map():
+    """When the windows agree on sources, ``locate`` returns the summed GCC's coarse map without searching it for
+    peaks: the same map the full search of that GCC gives."""
+    from ssl_core.geometry import cube8
+    from ssl_core.localizer import Localizer, LocalizerConfig
+    from signals import plane_wave
+
+    loc = Localizer(cube8(), LocalizerConfig())
+    rng = np.random.default_rng(2)
+    u = np.array([0.6, 0.7, 0.2]) / np.linalg.norm([0.6, 0.7, 0.2])
+    res = loc.locate(0.1 * plane_wave(cube8().positions, u, rng.standard_normal(FS // 2), FS))
+    assert res.detections
+    assert np.array_equal(res.srp_map, loc._search(res.gcc, res.n_eff)[0])

@@ -238,7 +238,7 @@ class MicHealth:
             return 0
         n = x.shape[1]
         half = n // 2
-        nfft = scipy.fft.next_fast_len(n + half + 1)   # lags up to +-half without circular wrap-around
+        nfft = scipy.fft.next_fast_len(n + half + 1, real=True)   # lags up to +-half without circular wrap-around
         spec = scipy.fft.rfft(x - x.mean(axis=1, keepdims=True), nfft, axis=1)
         f = np.fft.rfftfreq(nfft, 1.0 / cfg.fs)
         band = (f >= cfg.band_hz[0]) & (f <= cfg.band_hz[1])

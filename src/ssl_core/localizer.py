@@ -358,8 +358,11 @@ class Localizer:
                 return LocalizationResult(t_end, [], np.zeros(self.coarse_grid.n_points), frames)
             gcc, n_eff = gcc_sum / w_sum, w_sum**2 / w_sq
             detections = pool.modes(cfg.n_sources, np.deg2rad(cfg.min_separation_deg), min_windows=2)
-            moving = self.ego_noise is not None and self.ego_noise.moving(st.wheel_speeds)
-            srp_map, peaks = self._search(gcc, n_eff, excluded=self._ego_excluded() if moving else None)
+            if detections:  # the summed map's peaks are not needed: only the map (the search's first one)
+                srp_map, peaks = self._coarse.power(self._pooled(gcc)), []
+            else:
+                moving = self.ego_noise is not None and self.ego_noise.moving(st.wheel_speeds)
+                srp_map, peaks = self._search(gcc, n_eff, excluded=self._ego_excluded() if moving else None)
         level = float(10 * np.log10(ms_sum / frames))
         if not detections:  # no two windows agreed: the summed map's peaks, if significant
             for power, f, z in peaks:
@@ -642,8 +645,7 @@ class Localizer:
         peaks: list[tuple[float, int, float]] = []
         srp_map = None
         for k in range(cfg.n_sources):
-            pooled = maximum_filter1d(work, self._pool, axis=1, mode="nearest") if self._pool > 1 else work
-            coarse = self._coarse.power(pooled)
+            coarse = self._coarse.power(self._pooled(work))
             if srp_map is None:
                 srp_map = coarse
             if peaks:  # no second detection inside the separation cone of a found one
@@ -688,12 +690,15 @@ class Localizer:
             srp_map = np.zeros(self.coarse_grid.n_points)
         return srp_map, peaks
 
+    def _pooled(self, gcc: np.ndarray) -> np.ndarray:
+        """``gcc`` max-pooled over the coarse grid's lag spacing (what the nearest-lag coarse search reads)."""
+        return maximum_filter1d(gcc, self._pool, axis=1, mode="nearest") if self._pool > 1 else gcc
+
     def _novel_elsewhere(self, gcc: np.ndarray, found: int, cos_sep: float) -> bool:
         """Does the novelty-weighted ``gcc`` peak away from the found source (fine index ``found``)? If not,
         the found source is itself the novel one (a lone talker: measured, scanning the summed novelty map
         then found her reflections, false windows 35 -> 63 % at SNR 5 dB), so the rescan is not used."""
-        pooled = maximum_filter1d(gcc, self._pool, axis=1, mode="nearest") if self._pool > 1 else gcc
-        c = int(np.argmax(self._coarse.power(pooled)))
+        c = int(np.argmax(self._coarse.power(self._pooled(gcc))))
         return float(self.coarse_grid.directions[c] @ self.fine_grid.directions[found]) <= cos_sep
 
     def _beam_level(self, spec: np.ndarray, fine_index: int) -> float:
