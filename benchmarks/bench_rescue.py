@@ -55,7 +55,7 @@ NEW_SECTIONS = ("motion", "sound_map", "planner", "occupancy")
 
 
 # ----------------------------------------------------------------------------- worker side
-ORACLE_NAMES = ("no_false_detections", "localization", "hearing")   # ssl_sim.runner.ORACLES, in the tree run
+ORACLE_NAMES = ("no_false_detections", "exact_directions", "localization", "hearing")   # ssl_sim.runner.ORACLES, in the tree run
 
 
 def _scoring():

@@ -196,6 +196,7 @@ SOUNDING_FRACTION = 0.1
 #: Ablations of the robot's hearing by name (``benchmarks/bench_rescue.py --oracle``, ``tools/failure_breakdown.py
 #: --oracle``): the ``RescueRun`` switches each sets.
 ORACLES: dict[str, dict[str, bool]] = {"no_false_detections": {"drop_false_detections": True},
+                                       "exact_directions": {"snap_detections": True},
                                        "localization": {"oracle_localization": True},
                                        "hearing": {"oracle_localization": True, "oracle_voice": True}}
 
@@ -210,13 +211,15 @@ class RescueRun:
     Ablations of the robot's hearing (``ORACLES`` names them; the robot itself is unchanged): ``oracle_localization``
     replaces SRP-PHAT's detections by the true directions of the sources sounding in each listen
     (``_oracle_detections``), ``drop_false_detections`` drops those of no sounding source (``_true_detections``),
+    ``snap_detections`` also moves each of the others to the true direction of the sounding source it detected
+    (``_snapped_detections``: what SRP-PHAT misses stays missed, what it finds is exact),
     ``oracle_voice`` replaces the VAD's voice evidence by the truth (``_oracle_speech``; the robot's voice scan is
     then off, as with any ``speech`` given to the behaviour)."""
 
     def __init__(self, scenario: Scenario, seed: int | None = None, logger: RunLogger | None = None,
                  world: World | None = None, range_layout: RangeLayout | None = RangeLayout(),
                  oracle_localization: bool = False, oracle_voice: bool = False,
-                 drop_false_detections: bool = False) -> None:
+                 drop_false_detections: bool = False, snap_detections: bool = False) -> None:
         t0 = time.perf_counter()
         self.scenario = sc = scenario if seed is None else scenario.with_overrides(seed=seed)
         self.seed = sc.seed
@@ -248,6 +251,7 @@ class RescueRun:
         localizer = Localizer(cube8(), sc.localizer, ego_noise=ego)
         self.localizer = _RecordingLocalizer(localizer, self._on_result,
                                              self._oracle_detections if oracle_localization
+                                             else self._snapped_detections if snap_detections
                                              else self._true_detections if drop_false_detections else None)
         # The robot's microphone health monitor, as on the real robot (faults go to rerun and results).
         self.mic_health = MonitoredAudio(self.audio, MicHealth(cube8(), HealthConfig(fs=sc.localizer.fs)),
@@ -386,6 +390,27 @@ class RescueRun:
         cos = math.cos(math.radians(10.0))
         return replace(res, detections=[d for d in res.detections
                                         if len(dirs) and float(np.max(dirs @ np.asarray(d.direction, float))) >= cos])
+
+    @_bookkeeping
+    def _snapped_detections(self, res, samples):
+        """``res``'s detections of sounding sources (within 10 deg of one sounding in the window,
+        ``SOUNDING_FRACTION``), each moved to that source's true direction (array frame), the others dropped
+        (``snap_detections``, an ablation): SRP-PHAT's misses and its power, level and significance kept, its
+        direction errors and false detections gone."""
+        az, el, _, active = self._sources_heard(samples.shape[-1])
+        sounding = np.flatnonzero(active >= SOUNDING_FRACTION)
+        if not len(sounding):
+            return replace(res, detections=[])
+        dirs = np.array([_unit(az[k], el[k]) for k in sounding])
+        cos = math.cos(math.radians(10.0))
+        dets = []
+        for d in res.detections:
+            c = dirs @ np.asarray(d.direction, float)
+            j = int(np.argmax(c))
+            if c[j] >= cos:
+                k = sounding[j]
+                dets.append(replace(d, azimuth=float(az[k]), elevation=float(el[k]), direction=dirs[j].copy()))
+        return replace(res, detections=dets)
 
     @_bookkeeping
     def _oracle_speech(self, samples, detection, direction) -> float:
