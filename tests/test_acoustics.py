@@ -109,6 +109,26 @@ def test_level_calibration_and_inverse_distance_law():
     assert 20 * np.log10(lsb / (P_62_5 * 10 ** (-26 / 20) * 32768)) == pytest.approx(0.0, abs=1.0)
 
 
+def test_band_snr_follows_the_inverse_distance_law():
+    """Each source's band energy at the array against the rest: two white sources of the same level at 1 m and
+    2 m from a small array in free field are +6 and -6 dB (inverse square law); with the ambient field added both
+    fall, and a source that is silent in the window is -inf."""
+    centre = np.array([6.0, 6.0, 3.0])
+    mics = centre + 0.05 * np.array([[1, 0, 0], [-1, 0, 0], [0, 1, 0], [0, -1, 0]], float)
+    srcs = [SoundSource(tuple(centre + (1.0, 0.0, 0.0)), white(1), 70.0),
+            SoundSource(tuple(centre + (0.0, 2.0, 0.0)), white(2), 70.0)]
+    snr = free_field(srcs).band_snr_db(mics, FS, 2 * FS)
+    np.testing.assert_allclose(snr, [6.02, -6.02], atol=0.5)
+    noisy = AcousticSimulator(World(room=Room((12.0, 12.0, 6.0))),
+                              AcousticConfig(rt60_s=0.0, ism_order=0, ambient=AmbientNoise(60.0, "white")), srcs)
+    with_noise = noisy.band_snr_db(mics, FS, 2 * FS)
+    assert np.all(with_noise < snr) and with_noise[0] < snr[0] - 1.0
+    from ssl_sim.acoustics.signals import EventStream
+    silent = SoundSource(tuple(centre + (1.0, 0.0, 0.0)), EventStream(lambda rng: np.ones(10), FS, 1.0, 0, p_event=0.0),
+                         70.0)
+    assert free_field([silent, srcs[1]]).band_snr_db(mics, FS, FS)[0] == -np.inf
+
+
 def test_inter_microphone_delays_match_geometry():
     src_pos = np.array([3.0, 6.0, 3.0])
     sim = free_field([SoundSource(tuple(src_pos), white(), 62.5)])

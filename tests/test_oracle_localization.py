@@ -93,3 +93,14 @@ def test_exact_directions_move_srp_phat_detections_of_sounding_sources_to_the_tr
         el = np.degrees(np.arctan2(p[2] - h, np.hypot(p[0] - x, p[1] - y)))
         assert abs((d["azimuth_deg"] - az + 180.0) % 360.0 - 180.0) <= 0.1
         assert abs(d["elevation_deg"] - el) <= 0.2
+
+
+def test_recorded_snr_puts_at_most_one_source_above_the_rest():
+    # each source's band energy against all the others' and the ambient field: at most one can exceed the rest
+    listens = _listens(record_snr=True)
+    assert listens
+    for rec in listens:
+        snr = [s["snr_db"] for s in rec["sources"]]
+        assert all(v is None or np.isfinite(v) for v in snr)
+        assert sum(1 for v in snr if v is not None and v > 0.0) <= 1
+    assert any(s["snr_db"] is not None and s["snr_db"] > 0.0 for rec in listens for s in rec["sources"])

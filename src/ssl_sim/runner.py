@@ -214,12 +214,17 @@ class RescueRun:
     ``snap_detections`` also moves each of the others to the true direction of the sounding source it detected
     (``_snapped_detections``: what SRP-PHAT misses stays missed, what it finds is exact),
     ``oracle_voice`` replaces the VAD's voice evidence by the truth (``_oracle_speech``; the robot's voice scan is
-    then off, as with any ``speech`` given to the behaviour)."""
+    then off, as with any ``speech`` given to the behaviour).
+
+    ``record_snr``: every listen's truth (``listens``) also gives each source's band SNR at the array in that window
+    (``snr_db``: ``AcousticSimulator.band_snr_db``, its own sound against all the others' and the ambient field),
+    for analysis of what the robot could have heard; it renders every source again on its own."""
 
     def __init__(self, scenario: Scenario, seed: int | None = None, logger: RunLogger | None = None,
                  world: World | None = None, range_layout: RangeLayout | None = RangeLayout(),
                  oracle_localization: bool = False, oracle_voice: bool = False,
-                 drop_false_detections: bool = False, snap_detections: bool = False) -> None:
+                 drop_false_detections: bool = False, snap_detections: bool = False,
+                 record_snr: bool = False) -> None:
         t0 = time.perf_counter()
         self.scenario = sc = scenario if seed is None else scenario.with_overrides(seed=seed)
         self.seed = sc.seed
@@ -227,6 +232,7 @@ class RescueRun:
         self.world = world = world if world is not None else sc.world()
         self.sources = sc.sources(world, fs=sc.localizer.fs)
         self.n_victims = len(world.victims)
+        self.record_snr = record_snr
         # Parked physics skipped (SimRobot.park_settled): 12-14 % less CPU per run (bench_scenario seeds 0-3: 27.0x
         # and 28.6x instead of 24.7x and 25.1x), callers found 3, 3, 2, 3 vs 3, 3, 1, 3.
         self.robot = robot = SimRobot(world, park_settled=True)
@@ -430,6 +436,12 @@ class RescueRun:
         truth = [{"name": s.name, "kind": s.kind, "azimuth_deg": _deg(a), "elevation_deg": _deg(e),
                   "distance_m": _r(d), "active_fraction": _r(f, 2), "active": bool(f >= SOUNDING_FRACTION),
                   "direction": _unit(a, e)} for s, a, e, d, f in zip(self.sources, az, el, dist, active)]
+        if self.record_snr:
+            (origin, rot), window = self._window(n_samples)
+            if window is not None:
+                mics = origin + cube8().positions @ rot.T   # the array at the window's middle (world frame)
+                for s, v in zip(truth, self.audio.acoustics.band_snr_db(mics, *window)):
+                    s["snr_db"] = _r(float(v), 1)   # None: silent in the window (or alone in a silent room)
         candidates = [k for k, s in enumerate(truth) if s["active"]] or list(range(len(truth)))
         dets = []
         for d in res.detections:
