@@ -23,21 +23,26 @@ def _listens(scenario: str = "generator_louder", **ablation) -> list[dict]:
 def test_oracle_detects_every_sounding_source_at_its_true_direction():
     run = _run(oracle_localization=True)
     assert run.listens
-    where = {s.name: np.asarray(s.position, float) for s in run.sources}
-    h = run.robot.config.array_height   # the array's centre, on the robot's vertical axis
     for rec in run.listens:
         sounding = sorted(s["name"] for s in rec["sources"] if s["active"])
         # one detection per sounding source
         assert sorted(d["source"] for d in rec["detections"]) == sounding
-        # at that source's direction from the robot's recorded pose (plane geometry, not the runner's own truth;
-        # the pose is rounded to 1 mm and the parked robot creeps by less than a millimetre)
-        x, y, yaw = rec["pose"]
-        for d in rec["detections"]:
-            p = where[d["source"]]
-            az = np.degrees(np.arctan2(p[1] - y, p[0] - x) - yaw)
-            el = np.degrees(np.arctan2(p[2] - h, np.hypot(p[0] - x, p[1] - y)))
-            assert abs((d["azimuth_deg"] - az + 180.0) % 360.0 - 180.0) <= 0.1
-            assert abs(d["elevation_deg"] - el) <= 0.2
+        _assert_at_true_directions(run, rec)
+
+
+def _assert_at_true_directions(run: RescueRun, rec: dict) -> None:
+    """Every detection of listen ``rec`` lies at its source's direction from the robot's recorded pose (plane
+    geometry, not the runner's own truth; the pose is rounded to 1 mm and the parked robot creeps by less than a
+    millimetre)."""
+    where = {s.name: np.asarray(s.position, float) for s in run.sources}
+    h = run.robot.config.array_height   # the array's centre, on the robot's vertical axis
+    x, y, yaw = rec["pose"]
+    for d in rec["detections"]:
+        p = where[d["source"]]
+        az = np.degrees(np.arctan2(p[1] - y, p[0] - x) - yaw)
+        el = np.degrees(np.arctan2(p[2] - h, np.hypot(p[0] - x, p[1] - y)))
+        assert abs((d["azimuth_deg"] - az + 180.0) % 360.0 - 180.0) <= 0.1
+        assert abs(d["elevation_deg"] - el) <= 0.2
 
 
 def test_without_the_oracle_the_same_listens_are_srp_phat_detections():
@@ -84,15 +89,7 @@ def test_exact_directions_move_srp_phat_detections_of_sounding_sources_to_the_tr
     snapped = run.listens[0]
     near = sorted(d["source"] for d in plain["detections"] if d["error_deg"] <= 10.0)
     assert near and sorted(d["source"] for d in snapped["detections"]) == near
-    where = {s.name: np.asarray(s.position, float) for s in run.sources}
-    h = run.robot.config.array_height
-    x, y, yaw = snapped["pose"]
-    for d in snapped["detections"]:
-        p = where[d["source"]]
-        az = np.degrees(np.arctan2(p[1] - y, p[0] - x) - yaw)
-        el = np.degrees(np.arctan2(p[2] - h, np.hypot(p[0] - x, p[1] - y)))
-        assert abs((d["azimuth_deg"] - az + 180.0) % 360.0 - 180.0) <= 0.1
-        assert abs(d["elevation_deg"] - el) <= 0.2
+    _assert_at_true_directions(run, snapped)
 
 
 def test_recorded_snr_puts_at_most_one_source_above_the_rest():
