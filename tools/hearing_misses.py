@@ -25,6 +25,8 @@ from collections import Counter
 
 import numpy as np
 
+from ssl_core.grid import direction_from_angles
+
 NEAR_DEG = 10.0        # a detection this close (3-D angle) to her direction detected her
 DOMINANT_DB = 5.0      # band SNR above which a victim dominates what the array hears
 SNR_BINS_DB = (-math.inf, -20.0, -10.0, -5.0, 0.0, 5.0, 10.0, math.inf)
@@ -45,8 +47,7 @@ def run_one(index: int) -> list[dict]:
 
 
 def _unit(az_deg: float, el_deg: float) -> np.ndarray:
-    az, el = math.radians(az_deg), math.radians(el_deg)
-    return np.array([math.cos(el) * math.cos(az), math.cos(el) * math.sin(az), math.sin(el)])
+    return direction_from_angles(math.radians(az_deg), math.radians(el_deg))
 
 
 def classify(listens: list[dict]) -> list[dict]:
