@@ -270,7 +270,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--count", type=int, default=None, help="with --suite: only its first COUNT scenarios")
     ap.add_argument("--first", type=int, default=0, help="with --suite train: start at this index (a range apart "
                     "from the one a model was fitted on)")
-    ap.add_argument("--results-name", default="rescue", help="write benchmarks/results/NAME.json (_results.py); '' for none")
+    ap.add_argument("--results-name", default=None, help="write benchmarks/results/NAME.json (_results.py); '' for "
+                    "none (default: rescue, none with --tables-only: re-tabulated rows are not a stored result)")
     ap.add_argument("--tables-only", action="store_true",
                     help="run nothing: only tabulate the rows of --rows-in (e.g. to re-render an earlier run)")
     ap.add_argument("--rows-out", default=None, help="also write every run's row (JSON) here")
@@ -288,6 +289,8 @@ def main(argv: list[str] | None = None) -> int:
     args = ap.parse_args(argv)
     seeds = (list(range(*map(int, args.seeds.split(":")))) if ":" in args.seeds
              else [int(s) for s in args.seeds.split(",")])
+    if args.results_name is None:
+        args.results_name = "" if args.tables_only else "rescue"
     if args.worker:
         worker(args.paths, seeds, args.workers, args.worker, args.oracle)
         return 0
