@@ -59,10 +59,11 @@ from typing import Mapping, Protocol, Sequence
 import numpy as np
 
 from robot.events import FindCriterion
-from robot.sound_map import MapSource, SourceClass
+from robot.odometry import wrap_angle
+from robot.sound_map import DISTINCT_POSES_M, MapSource, SourceClass
 
-__all__ = ["FIND_RADIUS_M", "BASE_RADIUS_M", "MACHINE_RADIUS_M", "Heard", "FoundContext", "is_echo", "Cue", "CUES", "FoundModel",
-           "Assessment", "default_model_path"]
+__all__ = ["FIND_RADIUS_M", "BASE_RADIUS_M", "MACHINE_RADIUS_M", "Heard", "FoundContext", "is_echo", "Spot", "Cue",
+           "CUES", "FoundModel", "Assessment", "default_model_path"]
 
 #: The find's definition (``ssl_sim.scoring``): a report within this of a victim ...
 FIND_RADIUS_M = 0.5
@@ -312,6 +313,25 @@ def is_echo(ev, spot: Sequence) -> bool:
     return any(o is not ev and abs(math.remainder(o.azimuth - ev.azimuth, 2 * math.pi)) <= ECHO_AZIMUTH
                and ev.elevation < o.elevation and abs(o.elevation) < SHALLOW and ev.level_db <= o.level_db
                for o in spot)
+
+
+class Spot:
+    """Every bearing heard from one standing place (array frame), for ``is_echo``. Bearings compare only from
+    the same pose: a move of more than ``DISTINCT_POSES_M`` or a turn of more than 5 deg starts a new spot."""
+
+    def __init__(self) -> None:
+        self.heard: list = []
+        self.pose: np.ndarray | None = None
+
+    def add(self, pose: np.ndarray, evidence: Sequence) -> None:
+        """``evidence`` heard at ``pose`` (x, y m, yaw rad; odometry frame)."""
+        if self.pose is None or math.hypot(*(pose[:2] - self.pose[:2])) > DISTINCT_POSES_M \
+                or abs(wrap_angle(pose[2] - self.pose[2])) > math.radians(5.0):
+            self.heard, self.pose = [], pose.copy()
+        self.heard += evidence
+
+    def is_echo(self, ev) -> bool:
+        return is_echo(ev, self.heard)
 
 
 #: Every cue, in the order of the model's weights.

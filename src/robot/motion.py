@@ -1,4 +1,4 @@
-"""Motion primitives with odometry feedback: turn in place, translate holding the yaw, back off.
+"""Motion primitives with odometry feedback: turn in place, translate holding the yaw, follow a path, back off.
 
 Frames: headings are in the ROBOT frame at the start of the move (rad, CCW from forward) unless stated;
 poses in the odometry frame. Every primitive stops the drive when it ends; a bumper press, a stall (the
@@ -13,12 +13,12 @@ from __future__ import annotations
 import math
 from dataclasses import dataclass, fields
 from enum import StrEnum
-from typing import Callable, ClassVar
+from typing import Callable, ClassVar, Sequence
 
 import numpy as np
 
 from robot.hal import Clock, DriveBase, DriveStatus
-from robot.odometry import Odometry
+from robot.odometry import Odometry, wrap_angle
 from robot.ranging import RangeLayout
 
 __all__ = ["MotionConfig", "ContactKind", "Blocked", "Motion", "StallWatch"]
@@ -245,6 +245,34 @@ class Motion:
             self.stop()
         self.update_odometry()
         return done
+
+    def follow(self, points: Sequence[np.ndarray], pace: Callable[[float], bool] | None = None,
+               travelled: Callable[[np.ndarray, np.ndarray], None] | None = None) -> bool:
+        """Drive straight to each of ``points`` (x, y m, odometry frame) in turn, keeping the yaw and stopping
+        before a range return in the way; ``travelled(start, end)`` gets every stretch driven, also the one a
+        contact ends (before ``Blocked`` propagates). ``pace`` as in ``translate``; False when it ended the drive."""
+        going = True
+
+        def paced(seconds: float) -> bool:
+            nonlocal going
+            going = pace(seconds)
+            return going
+
+        for point in points:
+            start = self.odometry.pose[:2].copy()
+            dx, dy = point - start
+            try:
+                self.translate(float(wrap_angle(math.atan2(dy, dx) - self.odometry.pose[2])), float(np.hypot(dx, dy)),
+                               stop_for_ranges=True, pace=None if pace is None else paced)
+            except Blocked:
+                if travelled is not None:
+                    travelled(start, self.odometry.pose[:2])
+                raise
+            if travelled is not None:
+                travelled(start, self.odometry.pose[:2])
+            if not going:
+                return False
+        return True
 
     def back_off(self, heading_world: float) -> None:
         """Back ``backoff_m`` away from a contact met while moving along ``heading_world`` (rad, odometry frame)."""

@@ -32,7 +32,7 @@ from robot.drive_hearing import DriveHearing
 # The behaviour's vocabulary (robot.events), importable from here too.
 from robot.events import (Decision, DrivePayload, FindCriterion, FoundPayload, HeardCandidate, HeardPayload,
                           ObstaclePayload, RescueEvent, RescueState, SourcePayload, TargetPayload)
-from robot.found import BASE_RADIUS_M, FIND_RADIUS_M, Assessment, FoundContext, FoundModel, Heard, is_echo
+from robot.found import BASE_RADIUS_M, FIND_RADIUS_M, Assessment, FoundContext, FoundModel, Heard, Spot
 from robot.hal import AudioSource, Clock, DriveBase
 from robot.kinematics import OmniDriveParams
 from robot.listening import Listen, ListenEvidence, Listener
@@ -40,14 +40,14 @@ from robot.mission import Mission
 from robot.motion import Blocked, ContactKind, Motion, MotionConfig
 from robot.mount import ArrayMount
 from robot.occupancy import MapMemoryError, OccupancyConfig, OccupancyGrid
-from robot.odometry import GyroFusionConfig, Odometry, TravelConfig, pose_at, wrap_angle
+from robot.odometry import GyroFusionConfig, Odometry, TravelConfig, pose_at
 from robot.options import Option, OptionKind, OptionsConfig, Timing, choose
 from robot.planner import Plan, Planner, PlannerConfig, path_start
 from robot.pursuit import PursuitConfig, Pursuits
 from robot.ranging import RangeLayout, RangeScans
 from robot.recovery import Recovery, RecoveryConfig
 from robot.rescue_config import FoundVictim, RescueConfig
-from robot.sound_map import DISTINCT_POSES_M, MapSource, SoundMap, SoundMapConfig, SourceState
+from robot.sound_map import MapSource, SoundMap, SoundMapConfig, SourceState
 
 __all__ = ["RescueBehaviour", "RescueConfig", "FoundVictim", "Decision", "FindCriterion", "RescueEvent",
            "RescueState"]
@@ -110,12 +110,12 @@ class RescueBehaviour(Mission):
                              self.pursuits.config.confirm_probability, math.radians(sound_map.bearing_sigma_deg))
         self.contacts: Counter[ContactKind] = Counter()   # every move that ended early, by why (results.json)
         self.recovery = Recovery(self.motion, self.grid, self.coverage, self.contacts, self._emit,
-                                 lambda why: self._finish(Decision.STUCK, why), replace(recovery, settle_s=config.settle_s))
+                                 lambda why: self._finish(Decision.STUCK, why),
+                                 replace(recovery, settle_s=config.settle_s))
         self.assessments: list[Assessment] = []   # every P(find) judged, for the fit (tools/fit_found_model.py)
         self.target: int | None = None            # map source id being approached
         self.plan: Plan | None = None
-        self._spot: list[ListenEvidence] = []     # every bearing heard from the current spot (robot frame) ...
-        self._spot_at: np.ndarray | None = None   # ... and that spot's pose
+        self._spot = Spot()                       # the bearings heard from here, for the echo cue
         self._started = False
         self._doing: tuple[OptionKind, int | None] | None = None   # the option the current move serves
 
@@ -186,10 +186,7 @@ class RescueBehaviour(Mission):
         pose = self.pose
         assoc = self.map.update(res.evidence, pose, self.clock.now())
         self.coverage.listened(pose[:2], self.map.interferers())
-        if self._spot_at is None or math.hypot(*(pose[:2] - self._spot_at[:2])) > DISTINCT_POSES_M \
-                or abs(wrap_angle(pose[2] - self._spot_at[2])) > math.radians(5.0):
-            self._spot, self._spot_at = [], pose.copy()
-        self._spot += res.evidence
+        self._spot.add(pose, res.evidence)
         return self._report(res, assoc, pose)
 
     def _heard_driving(self, res: Listen, trajectory: np.ndarray) -> bool:
@@ -234,7 +231,7 @@ class RescueBehaviour(Mission):
                                                 and s.distance_to(xy) > BASE_RADIUS_M + FIND_RADIUS_M):
                 continue
             ev = heard.get(s.id)
-            h = None if ev is None else Heard(ev.elevation, ev.level_db, ev.power, is_echo(ev, self._spot))
+            h = None if ev is None else Heard(ev.elevation, ev.level_db, ev.power, self._spot.is_echo(ev))
             ctx = FoundContext(s, xy, self.mount.height_m, self.map.config.source_height_m, h, s.id == contact,
                                machines, found)
             a = self.found_model.assess(ctx, self.clock.now())
@@ -317,23 +314,12 @@ class RescueBehaviour(Mission):
         goal = legs[-1]
         self._emit(decision, f"{prefix + ': ' if prefix else ''}{total:.2f} m toward ({goal[0]:.2f}, {goal[1]:.2f})",
                    DrivePayload(total, [float(goal[0]), float(goal[1])], [leg.tolist() for leg in legs]))
-        pace = None
         if self.drive_hearing is not None:
-            self.drive_hearing.start()
-            pace = self.drive_hearing.pace
-        for leg in legs:
-            start = self.pose[:2].copy()
-            dx, dy = leg - start
-            try:
-                self.motion.translate(float(wrap_angle(math.atan2(dy, dx) - self.pose[2])), float(np.hypot(dx, dy)),
-                                      stop_for_ranges=True, pace=pace)
-            except Blocked as b:
-                self.grid.mark_path(start, self.pose[:2])
-                self._blocked(b, target)
-                return
-            self.grid.mark_path(start, self.pose[:2])
-            if pace is not None and self.drive_hearing.stopped:
-                return   # a window heard on the way changed what is worth most
+            self.drive_hearing.start()   # a window heard on the way may end the drive: it changed what is worth most
+        try:
+            self.motion.follow(legs, getattr(self.drive_hearing, "pace", None), self.grid.mark_path)
+        except Blocked as b:
+            self._blocked(b, target)
 
     def _blocked(self, b: Blocked, target: MapSource | None) -> None:
         self.contacts[b.kind] += 1
