@@ -329,6 +329,8 @@ def test_obstacle_rubble_room_listen_runs_with_occlusion():
     assert h_s[sim.N_PRE + 94] == pytest.approx(1 / d_s, rel=0.15)
     n_direct_b = sim.N_PRE + int(round(3.0 / C * FS))
     assert np.max(np.abs(h_b[n_direct_b - 3: n_direct_b + 4])) < 0.1 / 3.0
+    # the analysis' truth of the same geometry: blocked behind the block, clear beside the source and over its top
+    assert [bool(sim.line_of_sight(p)[0]) for p in (behind[0], beside[0], (4.5, 2.5, 2.5))] == [False, True, True]
 
 
 def test_robot_pitch_tilts_the_localized_elevation(localizer):

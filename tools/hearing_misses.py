@@ -7,7 +7,8 @@ alone). For every listen and every victim sounding in it (``ssl_sim.runner.SOUND
 frames) the listen *detected* her when a detection lies within ``NEAR_DEG`` of her true direction (array frame,
 the runner's matching). Printed: the detection rate per band-SNR bin and per distance; and, for the listens that
 miss a victim who dominates the band (SNR above ``DOMINANT_DB``), what their detections point at: another sounding
-source, a silent one, her azimuth only, or no source at all (a reflection or a lobe).
+source, a silent one, her azimuth only, or no source at all (a reflection or a lobe); split by whether her
+straight path to the array is clear of obstacles (else her sound arrives diffracted or reflected).
 
 Run (train split; choose on train):
 
@@ -66,7 +67,8 @@ def classify(listens: list[dict]) -> list[dict]:
             miss = None
             if not hit:
                 miss = "nothing detected" if not dets else _pointed_at(dets[0], s, srcs, dirs, cos_near)
-            rows.append({"snr_db": s.get("snr_db"), "distance_m": s["distance_m"], "detected": hit, "miss": miss})
+            rows.append({"snr_db": s.get("snr_db"), "distance_m": s["distance_m"],
+                         "line_of_sight": s.get("line_of_sight"), "detected": hit, "miss": miss})
     return rows
 
 
@@ -94,11 +96,16 @@ def _binned(rows: list[dict], key: str, edges: tuple[float, ...], unit: str) -> 
 def summary(rows: list[dict]) -> dict:
     dominant = [r for r in rows if r["snr_db"] is not None and r["snr_db"] > DOMINANT_DB]
     misses = Counter(r["miss"] for r in dominant if not r["detected"])
+    by_path = {}
+    for clear, name in ((True, "line of sight"), (False, "path blocked")):
+        sel = [r for r in dominant if r.get("line_of_sight") is clear]
+        by_path[name] = {"n": len(sel), "detected": sum(r["detected"] for r in sel),
+                         "misses": dict(Counter(r["miss"] for r in sel if not r["detected"]).most_common())}
     return {"n": len(rows), "detected": round(float(np.mean([r["detected"] for r in rows])), 3) if rows else None,
             "by_snr": _binned(rows, "snr_db", SNR_BINS_DB, "dB"),
             "by_distance": _binned(rows, "distance_m", DIST_BINS_M, "m"),
             "dominant": {"n": len(dominant), "detected": sum(r["detected"] for r in dominant),
-                         "misses": dict(misses.most_common())}}
+                         "misses": dict(misses.most_common()), "by_path": by_path}}
 
 
 def main(argv: list[str] | None = None) -> int:
@@ -119,6 +126,9 @@ def main(argv: list[str] | None = None) -> int:
     d = s["dominant"]
     print(f"victims dominating the band (SNR > {DOMINANT_DB:g} dB): detected {d['detected']} of {d['n']}; the misses' "
           f"strongest detection: " + ", ".join(f"{k} {v}" for k, v in d["misses"].items()))
+    for name, p in d["by_path"].items():
+        print(f"  {name}: detected {p['detected']} of {p['n']}; misses: "
+              + ", ".join(f"{k} {v}" for k, v in p["misses"].items()))
     if args.json:
         with open(args.json, "w") as f:
             json.dump({"summary": s, "rows": rows}, f)

@@ -217,8 +217,9 @@ class RescueRun:
     then off, as with any ``speech`` given to the behaviour).
 
     ``record_snr``: every listen's truth (``listens``) also gives each source's band SNR at the array in that window
-    (``snr_db``: ``AcousticSimulator.band_snr_db``, its own sound against all the others' and the ambient field),
-    for analysis of what the robot could have heard; it renders every source again on its own."""
+    (``snr_db``: ``AcousticSimulator.band_snr_db``, its own sound against all the others' and the ambient field)
+    and whether its straight path to the array is clear of obstacles (``line_of_sight``), for analysis of what the
+    robot could have heard; it renders every source again on its own."""
 
     def __init__(self, scenario: Scenario, seed: int | None = None, logger: RunLogger | None = None,
                  world: World | None = None, range_layout: RangeLayout | None = RangeLayout(),
@@ -440,8 +441,10 @@ class RescueRun:
             (origin, rot), window = self._window(n_samples)
             if window is not None:
                 mics = origin + cube8().positions @ rot.T   # the array at the window's middle (world frame)
-                for s, v in zip(truth, self.audio.acoustics.band_snr_db(mics, *window)):
+                acoustics = self.audio.acoustics
+                for s, v, los in zip(truth, acoustics.band_snr_db(mics, *window), acoustics.line_of_sight(origin)):
                     s["snr_db"] = _r(float(v), 1)   # None: silent in the window (or alone in a silent room)
+                    s["line_of_sight"] = bool(los)
         candidates = [k for k, s in enumerate(truth) if s["active"]] or list(range(len(truth)))
         dets = []
         for d in res.detections:

@@ -384,6 +384,16 @@ class AcousticSimulator:
                 Y += term
         return sfft.irfft(Y, n_fft, axis=-1)[..., L - 1: L - 1 + n]
 
+    def line_of_sight(self, point) -> np.ndarray:
+        """Whether the straight path from each source to ``point`` (3, world m) is clear of every obstacle box
+        (n_sources,) bool. Ground truth for analysis: where it is blocked, the sound arrives diffracted over an
+        edge or reflected, from another direction than the source's."""
+        p = np.asarray(point, float).reshape(1, 3)
+        if not self._sources:
+            return np.zeros(0, bool)
+        src = np.array([s.position for s in self._sources])
+        return ~self._boxes.segments_hit(src, np.repeat(p, len(src), axis=0)).any(axis=1)
+
     def band_snr_db(self, mic_positions_world, n0: int, n: int, band_hz: tuple[float, float] = (300.0, 6000.0)
                     ) -> np.ndarray:
         """Each source's signal-to-rest ratio (n_sources,) in dB at microphones ``mic_positions_world`` (n_mics, 3)
