@@ -178,7 +178,7 @@ def test_a_rescue_run_that_hears_while_driving_uses_its_own_found_model_and_hear
         r = run.run()
     b = run.behaviour
     assert b.drive_hearing is not None and b.localizer.ego_noise is not None
-    assert b.found_model.provenance["data"].endswith("assessments_driving.csv.gz")
+    assert b.finder.model.provenance["data"].endswith("assessments_driving.csv.gz")
     driving = [e for e in b.events if e.reason.startswith("while driving")]
     assert b.drive_hearing.windows >= 3 and len(driving) == b.drive_hearing.windows
     # every localizer result is scored against the truth at its window's middle (the runner's listens): the

@@ -5,12 +5,13 @@ raises P(find) as its feature grows), so the tests hold for the hand-set weights
 import json
 import math
 from dataclasses import replace
+from types import SimpleNamespace
 
 import numpy as np
 import pytest
 
-from robot.found import (CUES, FIND_RADIUS_M, MACHINE_RADIUS_M, FoundContext, FoundModel, Heard, default_model_path,
-                         is_echo)
+from robot.found import (BASE_RADIUS_M, CUES, FIND_RADIUS_M, MACHINE_RADIUS_M, Finder, FoundContext, FoundModel, Heard,
+                         default_model_path, is_echo)
 from robot.mount import ArrayMount
 from robot.sound_map import Listen, MapSource, SoundMapConfig, SourceClass, SourceState
 
@@ -187,3 +188,25 @@ def test_the_model_shipped_loads_with_every_weight_a_known_cue():
     m = FoundModel.load()
     assert set(m.weights) <= {q.name for q in CUES} and math.isfinite(m.bias)
     assert 0 < float(m.provenance.get("confirm_probability", 0.3)) < 1
+
+
+def test_finder_judges_unfound_sources_heard_now_or_within_reach_most_probable_first():
+    """Reach: the base within BASE_RADIUS_M of a victim within FIND_RADIUS_M of the estimate."""
+    reach = BASE_RADIUS_M + FIND_RADIUS_M
+    near = source(x=1.0, sid=1)                                  # within reach, not heard now
+    far_heard = source(x=reach + 2.0, sigma=1.5, sid=2)          # beyond reach but heard now
+    far = source(x=reach + 0.1, sid=3)                           # beyond reach and silent: not judged
+    found = replace(source(x=0.5, sid=4), state=SourceState.FOUND)  # found: never judged again
+    finder = Finder(FoundModel.load(), H, MOUTH)
+    ev = SimpleNamespace(azimuth=0.0, elevation=math.radians(-5.0), level_db=-40.0, power=0.3)  # array frame
+    judged = finder.judge([near, far_heard, far, found], (0.0, 0.0), {2: ev}, now=3.0)
+    assert sorted(s.id for s, _ in judged) == [1, 2]
+    probs = [a.probability for _, a in judged]
+    assert probs == sorted(probs, reverse=True)
+    assert [a.source_id for a in finder.assessments] == [1, 2] and all(a.time == 3.0 for a in finder.assessments)
+    # each one judged by the model on the context it was in
+    for s, a in judged:
+        heard = None if s.id != 2 else Heard(ev.elevation, ev.level_db, ev.power, False)
+        assert a.probability == pytest.approx(finder.model.assess(ctx(s, heard=heard), 3.0).probability)
+    # a contact at a source beyond reach brings it in
+    assert 3 in [s.id for s, _ in finder.judge([far], (0.0, 0.0), {}, now=4.0, contact=3)]

@@ -9,7 +9,7 @@ data ``assessments_driving.csv.gz`` and model ``robot/models/found_model_driving
 way add listens between the standing ones, so a cue such as support means less per listen there.
 
 ``collect`` runs the behaviour on train scenarios (seed = index) and writes every P(find) judgement it made
-(``RescueBehaviour.assessments``: the cues' features per source per listen) with its label from the simulator's
+(``RescueBehaviour.finder.assessments``: the cues' features per source per listen) with its label from the simulator's
 truth: 1 when a victim not yet found lies within ``FIND_RADIUS_M`` of the report (the map's estimate) and the robot's
 true base within ``BASE_RADIUS_M`` of her (``ssl_sim.scoring``'s find), else 0.
 
@@ -95,7 +95,7 @@ def _label_run(index: int, p_find: float | None = None, confirm: float | None = 
     victims = np.array([s.position[:2] for s in run.sources[: run.n_victims]], float)
     found_at = {k: float(e["time_s"]) for k, e in run.found.items()}
     rows = []
-    for a in run.behaviour.assessments:
+    for a in run.behaviour.finder.assessments:
         _, x, y, _, _ = run._pose_at(a.time)
         rep = np.asarray(a.position, float)
         ok = [k for k, v in enumerate(victims) if found_at.get(k, math.inf) >= a.time

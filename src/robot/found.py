@@ -60,7 +60,7 @@ import numpy as np
 
 from robot.events import FindCriterion
 from robot.odometry import wrap_angle
-from robot.sound_map import DISTINCT_POSES_M, MapSource, SourceClass
+from robot.sound_map import DISTINCT_POSES_M, MapSource, SourceClass, SourceState
 
 __all__ = ["FIND_RADIUS_M", "BASE_RADIUS_M", "MACHINE_RADIUS_M", "Heard", "FoundContext", "is_echo", "Spot", "Cue",
            "CUES", "FoundModel", "Assessment", "default_model_path"]
@@ -418,3 +418,35 @@ class FoundModel:
         s = ctx.source
         return Assessment(time, s.id, (float(s.position[0]), float(s.position[1])), tuple(map(float, ctx.xy)), f, p,
                           crit)
+
+
+class Finder:
+    """The found stage: P(find) of every unfound map source heard now or whose estimate is within reach of a find
+    (the base within ``BASE_RADIUS_M`` of a victim within ``FIND_RADIUS_M`` of the estimate). Keeps the bearings
+    heard from the current standing place (``spot``, for the echo cue) and every assessment (``assessments``, the
+    data of the fit: tools/fit_found_model.py)."""
+
+    def __init__(self, model: FoundModel, array_height_m: float, mouth_height_m: float) -> None:
+        self.model, self.array_height_m, self.mouth_height_m = model, array_height_m, mouth_height_m
+        self.spot = Spot()
+        self.assessments: list[Assessment] = []
+
+    def judge(self, sources: Sequence[MapSource], xy, heard: Mapping[int, object], now: float,
+              machines: tuple[tuple[float, float], ...] = (), found: tuple[tuple[float, float], ...] = (),
+              contact: int | None = None) -> list[tuple[MapSource, Assessment]]:
+        """``sources`` judged from the base at ``xy`` (world m), most probable first. ``heard``: this listen's
+        evidence by source id (array frame); ``machines``, ``found``: world (x, y) of the mapped interferers and
+        of the victims reported so far; ``contact``: the source touched at its estimate."""
+        xy = (float(xy[0]), float(xy[1]))
+        out = []
+        for s in sources:
+            if s.state is SourceState.FOUND or (s.id not in heard and s.id != contact
+                                                and s.distance_to(xy) > BASE_RADIUS_M + FIND_RADIUS_M):
+                continue
+            ev = heard.get(s.id)
+            h = None if ev is None else Heard(ev.elevation, ev.level_db, ev.power, self.spot.is_echo(ev))
+            ctx = FoundContext(s, xy, self.array_height_m, self.mouth_height_m, h, s.id == contact, machines, found)
+            a = self.model.assess(ctx, now)
+            self.assessments.append(a)
+            out.append((s, a))
+        return sorted(out, key=lambda sa: -sa[1].probability)

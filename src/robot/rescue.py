@@ -32,7 +32,7 @@ from robot.drive_hearing import DriveHearing
 # The behaviour's vocabulary (robot.events), importable from here too.
 from robot.events import (Decision, DrivePayload, FindCriterion, FoundPayload, HeardCandidate, HeardPayload,
                           ObstaclePayload, RescueEvent, RescueState, SourcePayload, TargetPayload)
-from robot.found import BASE_RADIUS_M, FIND_RADIUS_M, Assessment, FoundContext, FoundModel, Heard, Spot
+from robot.found import FIND_RADIUS_M, Assessment, Finder, FoundModel
 from robot.hal import AudioSource, Clock, DriveBase
 from robot.kinematics import OmniDriveParams
 from robot.listening import Listen, ListenEvidence, Listener
@@ -95,13 +95,13 @@ class RescueBehaviour(Mission):
             self.drive_hearing = DriveHearing(self.listener, clock, lambda: self.pose, config.listen_s,
                                               config.min_power, self._heard_driving)
         # P(find)'s cues were fitted on runs that heard the way this one hears (robot.found.default_model_path)
-        self.found_model = found_model if found_model is not None else FoundModel.load(
-            driving=self.drive_hearing is not None)
+        found_model = found_model or FoundModel.load(driving=self.drive_hearing is not None)
+        self.finder = Finder(found_model, mount.height_m, sound_map.source_height_m)
         self.map = SoundMap(sound_map, mount)
         self.coverage = ListeningCoverage(self.grid.origin, self.grid.n, self.grid.resolution, coverage,
                                           memory_budget_mb=self.grid.coverage_store_mb)
         self.planner = Planner(planner)
-        fitted = self.found_model.provenance
+        fitted = found_model.provenance
         self.pursuits = Pursuits(pursuit, float(fitted.get("confirm_probability", 0.3)))
         if options.victims_per_m2 is None:
             options = replace(options, victims_per_m2=float(fitted.get("victims_per_m2", 0.05)))
@@ -112,10 +112,8 @@ class RescueBehaviour(Mission):
         self.recovery = Recovery(self.motion, self.grid, self.coverage, self.contacts, self._emit,
                                  lambda why: self._finish(Decision.STUCK, why),
                                  replace(recovery, settle_s=config.settle_s))
-        self.assessments: list[Assessment] = []   # every P(find) judged, for the fit (tools/fit_found_model.py)
         self.target: int | None = None            # map source id being approached
         self.plan: Plan | None = None
-        self._spot = Spot()                       # the bearings heard from here, for the echo cue
         self._started = False
         self._doing: tuple[OptionKind, int | None] | None = None   # the option the current move serves
 
@@ -186,7 +184,7 @@ class RescueBehaviour(Mission):
         pose = self.pose
         assoc = self.map.update(res.evidence, pose, self.clock.now())
         self.coverage.listened(pose[:2], self.map.interferers())
-        self._spot.add(pose, res.evidence)
+        self.finder.spot.add(pose, res.evidence)
         return self._report(res, assoc, pose)
 
     def _heard_driving(self, res: Listen, trajectory: np.ndarray) -> bool:
@@ -219,29 +217,18 @@ class RescueBehaviour(Mission):
     # -- found ----------------------------------------------------------------------
     def _judge(self, heard: dict[int, ListenEvidence], contact: int | None = None
                ) -> list[tuple[MapSource, Assessment]]:
-        """P(find) of every unfound source heard now or whose estimate is within reach of a find (the base within
-        ``BASE_RADIUS_M`` of a victim within ``FIND_RADIUS_M`` of the estimate), most probable first. A source
-        within reach that is not found now counts a miss (``robot.pursuit``)."""
-        xy = tuple(float(v) for v in self.pose[:2])
-        machines = tuple(tuple(m) for m in self.map.interferers())
-        found = tuple((v.position[0], v.position[1]) for v in self.victims)
-        out = []
-        for s in self.map.sources:
-            if s.state is SourceState.FOUND or (s.id not in heard and s.id != contact
-                                                and s.distance_to(xy) > BASE_RADIUS_M + FIND_RADIUS_M):
-                continue
-            ev = heard.get(s.id)
-            h = None if ev is None else Heard(ev.elevation, ev.level_db, ev.power, self._spot.is_echo(ev))
-            ctx = FoundContext(s, xy, self.mount.height_m, self.map.config.source_height_m, h, s.id == contact,
-                               machines, found)
-            a = self.found_model.assess(ctx, self.clock.now())
-            self.assessments.append(a)
-            out.append((s, a))
+        """P(find) of the sources the found stage judges now (``robot.found.Finder``), most probable first. One
+        within ``FIND_RADIUS_M`` that is not found now counts a miss (``robot.pursuit``)."""
+        xy = self.pose[:2]
+        judged = self.finder.judge(self.map.sources, xy, heard, self.clock.now(),
+                                   tuple(tuple(m) for m in self.map.interferers()),
+                                   tuple((v.position[0], v.position[1]) for v in self.victims), contact)
+        for s, a in judged:
             if a.probability < self.config.p_find and s.distance_to(xy) <= FIND_RADIUS_M:
                 self.pursuits.missed(s.id)
             else:
                 self.pursuits.moved_away(s.id)
-        return sorted(out, key=lambda sa: -sa[1].probability)
+        return judged
 
     def _declare(self, s: MapSource, a: Assessment) -> None:
         now = self.clock.now()
@@ -249,7 +236,7 @@ class RescueBehaviour(Mission):
         self.pursuits.found(s.id)
         pos = (float(s.position[0]), float(s.position[1]))
         height = float(np.clip(s.position[2], 0.0, 2.0))
-        why = a.describe(self.found_model.weights)
+        why = a.describe(self.finder.model.weights)
         self.victims.append(FoundVictim(pos, now, why, height, s.victim_probability, s.id, a.criterion))
         if self.target == s.id:
             self.target, self.plan = None, None
