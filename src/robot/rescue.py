@@ -95,7 +95,8 @@ class RescueBehaviour(Mission):
             self.drive_hearing = DriveHearing(self.listener, clock, lambda: self.pose, config.listen_s,
                                               config.min_power, self._heard_driving)
         # P(find)'s cues were fitted on runs that heard the way this one hears (robot.found.default_model_path)
-        found_model = found_model or FoundModel.load(driving=self.drive_hearing is not None)
+        if found_model is None:
+            found_model = FoundModel.load(driving=self.drive_hearing is not None)
         self.finder = Finder(found_model, mount.height_m, sound_map.source_height_m)
         self.map = SoundMap(sound_map, mount)
         self.coverage = ListeningCoverage(self.grid.origin, self.grid.n, self.grid.resolution, coverage,
