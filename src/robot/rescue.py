@@ -182,27 +182,23 @@ class RescueBehaviour(Mission):
         pose = self.pose.copy()                   # standing: the pose the block is captured at
         res = self.listener.listen(cfg.listen_s, 0.0, cfg.min_power, pose=tuple(pose))
         self.motion.update_odometry(stationary=True)
-        pose = self.pose
-        assoc = self.map.update(res.evidence, pose, self.clock.now())
-        self.coverage.listened(pose[:2], self.map.interferers())
-        self.finder.spot.add(pose, res.evidence)
-        return self._report(res, assoc, pose)
+        self.finder.spot.add(self.pose, res.evidence)
+        return self._believe(res, self.pose, self.clock.now())
 
     def _heard_driving(self, res: Listen, trajectory: np.ndarray) -> bool:
         """A window heard while driving (``robot.drive_hearing``) into the map, at the pose of its middle, and
         the coverage. The drive goes on while the option it serves is still the one worth most (the current
         target keeps its ``keep_factor``); else it ends here and the next cycle listens standing and decides."""
         pose = np.array(pose_at(trajectory, 0.5 * (trajectory[0, 0] + trajectory[-1, 0])))
-        assoc = self.map.update(res.evidence, pose, float(trajectory[-1, 0]))
-        self.coverage.listened(pose[:2], self.map.interferers())
-        self._report(res, assoc, pose, "while driving: ")
+        self._believe(res, pose, float(trajectory[-1, 0]), "while driving: ")
         o = self._choose()
         return (o.kind, None if o.source is None else o.source.id) == self._doing
 
-    def _report(self, res: Listen, assoc, pose: np.ndarray, prefix: str = "") -> dict[int, ListenEvidence]:
-        """The listen's event; returns its evidence by unfound source id."""
+    def _believe(self, res: Listen, pose: np.ndarray, now: float, prefix: str = "") -> dict[int, ListenEvidence]:
+        """A listen heard at ``pose`` (odometry frame) into the map and the coverage, and its event; returns its
+        evidence by unfound source id."""
         heard, cands, ignored = {}, [], list(res.ignored)
-        for ev, sid in assoc:
+        for ev, sid in self.map.update(res.evidence, pose, now):
             s = self.map.source(sid)
             if s.state is SourceState.FOUND:
                 ignored.append(f"az {math.degrees(ev.azimuth):+.0f} deg el {math.degrees(ev.elevation):+.0f} deg "
@@ -211,6 +207,7 @@ class RescueBehaviour(Mission):
             heard[sid] = ev
             cands.append(HeardCandidate(sid, ev.azimuth, ev.elevation, ev.level_db, ev.speech_fraction,
                                         ev.voice_scan, s.cls.value, s.state.value))
+        self.coverage.listened(pose[:2], self.map.interferers())
         data = HeardPayload(res.n_detections, cands, ignored, pose.tolist())
         self._emit(data.decision, prefix + data.describe(), data)
         return heard
@@ -235,16 +232,14 @@ class RescueBehaviour(Mission):
         now = self.clock.now()
         self.map.set_state(s.id, SourceState.FOUND, now)
         self.pursuits.found(s.id)
-        pos = (float(s.position[0]), float(s.position[1]))
-        height = float(np.clip(s.position[2], 0.0, 2.0))
-        why = a.describe(self.finder.model.weights)
-        self.victims.append(FoundVictim(pos, now, why, height, s.victim_probability, s.id, a.criterion))
+        f = FoundPayload((float(s.position[0]), float(s.position[1])), float(np.clip(s.position[2], 0.0, 2.0)), s.id,
+                         a.describe(self.finder.model.weights), a.criterion, s.horizontal_sigma_m, s.victim_probability)
+        self.victims.append(FoundVictim(f.position, now, f.criterion, f.height, f.victim_probability, s.id, f.cue))
         if self.target == s.id:
             self.target, self.plan = None, None
         self.state = RescueState.FOUND
-        self._emit(Decision.VICTIM_FOUND, f"victim #{len(self.victims)} (source #{s.id}) at ({pos[0]:.2f}, "
-                                          f"{pos[1]:.2f}) m +- {s.horizontal_sigma_m:.2f} m: {why}",
-                   FoundPayload(pos, height, s.id, why, a.criterion, s.horizontal_sigma_m, s.victim_probability))
+        self._emit(Decision.VICTIM_FOUND, f"victim #{len(self.victims)} (source #{s.id}) at ({f.position[0]:.2f}, "
+                                          f"{f.position[1]:.2f}) m +- {f.sigma_m:.2f} m: {f.criterion}", f)
         if self.config.max_victims is not None and len(self.victims) >= self.config.max_victims:
             self._finish(Decision.ALL_FOUND, f"found {len(self.victims)} victim(s) = max_victims")
 
