@@ -47,12 +47,14 @@ bench: $(STAMP_TEST) system-deps
 	$(PY) tools/write_results.py; \
 	if [ -n "$$failed" ]; then echo "make bench: failed:$$failed"; exit 1; fi
 
-# Before a release: every speed benchmark again with its default arguments, compared with the stored figures
-# (exit non-zero when one is more than 1.5x worse, or was stored with other arguments). Nothing is written.
+# Before a release: every speed benchmark again with the arguments its stored figures were measured with,
+# compared with them (exit non-zero when one is more than 1.5x worse, or none is stored). Nothing is written.
 SPEED_BENCH := acoustics env health hearing listen locate_memory physics scenario srp tracking
 bench-check: $(STAMP_TEST)
-	@failed=""; for b in $(SPEED_BENCH); do echo "== bench_$$b --check"; \
-	$(PY) benchmarks/bench_$$b.py --check || failed="$$failed $$b"; done; \
+	@failed=""; for b in $(SPEED_BENCH); do \
+	args=$$($(PY) benchmarks/_results.py argv $$b) || { failed="$$failed $$b"; continue; }; \
+	echo "== bench_$$b $$(echo $$args) --check"; \
+	$(PY) benchmarks/bench_$$b.py $$args --check || failed="$$failed $$b"; done; \
 	if [ -n "$$failed" ]; then echo "make bench-check: not within 1.5x of the stored figures:$$failed"; exit 1; fi
 
 clean:

@@ -77,6 +77,14 @@ def stored_for_check(name: str, results_dir: str | Path | None = None) -> tuple[
     return path, stored, ""
 
 
+def stored_argv(name: str, results_dir: str | Path | None = None) -> list[str]:
+    """The arguments ``benchmarks/results/<name>.json`` was measured with (a ``--check`` must repeat them)."""
+    path = (Path(results_dir) if results_dir is not None else RESULTS_DIR) / f"{name}.json"
+    if not path.exists():
+        raise FileNotFoundError(f"no stored result {path}; run benchmarks/bench_{name}.py first")
+    return [str(a) for a in json.loads(path.read_text()).get("argv", [])]
+
+
 def require_stored(name: str, check: bool) -> None:
     """With ``check``, exit 2 at once (before measuring) when there is no stored result for these arguments."""
     if check:
@@ -129,3 +137,13 @@ def finish(name: str, figures: Mapping[str, float], tables: Mapping[str, str] | 
         return check_result(name, figures, better or {})
     write_result(name, figures, tables)
     return 0
+
+
+if __name__ == "__main__":
+    # ``python benchmarks/_results.py argv NAME``: the stored arguments, one per line (``make bench-check``)
+    if len(sys.argv) != 3 or sys.argv[1] != "argv":
+        raise SystemExit("usage: python benchmarks/_results.py argv NAME")
+    try:
+        print("\n".join(stored_argv(sys.argv[2])))
+    except FileNotFoundError as exc:
+        raise SystemExit(str(exc)) from None

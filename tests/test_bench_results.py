@@ -55,3 +55,13 @@ def test_require_stored_stops_before_measuring(stored, monkeypatch):
     with pytest.raises(SystemExit) as e:
         _results.require_stored("x", check=True)
     assert e.value.code == 2
+
+
+def test_stored_arguments_are_what_a_release_check_repeats(stored, monkeypatch):
+    """``make bench-check`` reruns each benchmark with the arguments its stored figure was measured with."""
+    assert _results.stored_argv("x", results_dir=stored) == ["--seconds", "5"]
+    with pytest.raises(FileNotFoundError, match="nothing_stored"):
+        _results.stored_argv("nothing_stored", results_dir=stored)
+    # the same arguments again, with --check appended as the Makefile does: compared, not refused
+    monkeypatch.setattr(sys, "argv", ["bench_x.py", *_results.stored_argv("x", results_dir=stored), "--check"])
+    assert _results.check_result("x", {"cpu_ms": 10.0}, {"cpu_ms": "lower"}, results_dir=stored) == 0

@@ -28,7 +28,7 @@ Every figure below was written by a benchmark into `benchmarks/results/<name>.js
 scatter). Re-measure with `make bench` (every benchmark, default arguments) or one benchmark with its own
 arguments, then `python tools/write_results.py`. Speed benchmarks take `--check`: they compare a new measurement
 with the stored one (made with the same arguments) and exit 1 when it is more than 1.5x worse; `make bench-check`
-runs them all.
+runs them all, each with the arguments of its stored figure.
 """
 
 
