@@ -202,11 +202,12 @@ def run_pra(name: str, trials, k: int, n_windows: int) -> dict:
 # ----------------------------------------------------------------------------------------- CPU
 def cpu_child(seconds: float, pin: bool, n_sources: int = 1, rescan: bool = False) -> dict:
     """CPU (process_time) per second of audio of detection (+ tracking) at the 1.5 deg grid, this process."""
+    import ssl_core.blas
     import ssl_core.localizer as L
     from experiments.common import Lab, Truth, build_sim
 
     if not pin:
-        L._BLAS = False  # disable the one-thread pin: what numpy's default thread pool costs
+        ssl_core.blas.disable()  # no one-thread pin: what numpy's default thread pool costs
     lab = Lab(duration_s=seconds)
     x = build_sim(lab, [Truth(40.0, 10.0, 1.5)], 1).listen_pose(lab.pose, seconds, mount=lab.mount)
     Tracker = _tracker_class()

@@ -30,6 +30,7 @@ from itertools import combinations
 import numpy as np
 import scipy.fft
 
+from ssl_core.blas import one_blas_thread
 from ssl_core.gcc_phat import LagSteering, band_bins, frame_spectra, summed_phat_cross_spectra
 from ssl_core.geometry import ArrayGeometry, get_array
 from ssl_core.srp import SOUND_SPEED
@@ -188,6 +189,10 @@ class MicHealth:
     # ------------------------------------------------------------------ one window
     def analyse(self, x: np.ndarray) -> list[Fault]:
         """Faults visible in one window ``x`` (channels, samples) float; no confirmation."""
+        with one_blas_thread():
+            return self._analyse(x)
+
+    def _analyse(self, x: np.ndarray) -> list[Fault]:
         cfg = self.config
         faults: list[Fault] = []
         n_ch = x.shape[0]

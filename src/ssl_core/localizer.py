@@ -20,7 +20,6 @@ The whole recording (:meth:`Localizer.locate`) pools the windows' detections
 """
 from __future__ import annotations
 
-import contextlib
 from collections.abc import Iterable, Iterator
 from dataclasses import dataclass, field
 
@@ -30,6 +29,7 @@ from scipy.signal import lfilter
 from scipy.spatial import cKDTree
 
 from ssl_core.beamform import FULL_SCALE_SINE_MS as _FULL_SCALE_SINE_MS
+from ssl_core.blas import one_blas_thread
 from ssl_core.beamform import arrival_times, delay_and_sum
 from ssl_core.detection import Detection
 from ssl_core.ego_noise import EgoNoiseSuppressor
@@ -57,22 +57,6 @@ _NOVELTY_RIDGE = 0.01
 # 32-128 ms, except g_on 1.5 at 128 ms (73 %); g_on 4 was no better on all eight.
 _ONSET_GAIN = 2.0
 _TABLE_BYTES_PER_POINT_PAIR = 48  # peak bytes of building the tables, per fine point and pair: tracemalloc, 45-48 at 0.5-1.5 deg
-
-
-def _one_blas_thread():
-    """Pin BLAS to one thread for the hot path: its matrices are small, so OpenBLAS's default
-    thread pool only burns CPU (measured 2.3x-21x). threadpoolctl when installed."""
-    global _BLAS
-    if _BLAS is None:
-        try:
-            from threadpoolctl import ThreadpoolController
-            _BLAS = ThreadpoolController()
-        except ImportError:  # pure-Python optional speed-up; numpy/scipy stay the only hard needs
-            _BLAS = False
-    return _BLAS.limit(limits=1, user_api="blas") if _BLAS else contextlib.nullcontext()
-
-
-_BLAS = None
 
 
 @dataclass(frozen=True)
@@ -310,7 +294,7 @@ class Localizer:
         (None or zeros: standing; the windows completed by this block use them)."""
         x = self._check(block, fs)
         self._stream.wheel_speeds = self._check_speeds(wheel_speeds)
-        with _one_blas_thread():
+        with one_blas_thread():
             return self._process(x, self._stream)
 
     def process_all(self, recording, fs: int | None = None) -> list[LocalizationResult]:
@@ -344,7 +328,7 @@ class Localizer:
         gcc_sum, w_sum, w_sq, ms_sum, frames, t_end = 0.0, 0.0, 0.0, 0.0, 0, 0.0
         st = self._new_stream()
         st.wheel_speeds = self._check_speeds(wheel_speeds)
-        with _one_blas_thread():
+        with one_blas_thread():
             for r in self._windows(blocks, fs, st):
                 pool.add(r.detections)
                 t_end = r.time
@@ -424,7 +408,7 @@ class Localizer:
             raise ValueError(
                 f"recording too short: {x.shape[1]} samples, need at least frame_size={self.config.frame_size}"
             )
-        with _one_blas_thread():
+        with one_blas_thread():
             spec, ms = self._analyse(x)
             t_end = ((ms.size - 1) * self.config.hop + self.config.frame_size) / self.config.fs
             return self._window_result(spec, ms, t_end, self._new_stream())
