@@ -10,7 +10,7 @@ from __future__ import annotations
 
 import contextlib
 
-__all__ = ["one_blas_thread"]
+__all__ = ["one_blas_thread", "disable"]
 
 _CONTROLLER = None   # None: not looked up yet; False: threadpoolctl missing or disabled
 

@@ -29,8 +29,8 @@ from scipy.signal import lfilter
 from scipy.spatial import cKDTree
 
 from ssl_core.beamform import FULL_SCALE_SINE_MS as _FULL_SCALE_SINE_MS
-from ssl_core.blas import one_blas_thread
 from ssl_core.beamform import arrival_times, delay_and_sum
+from ssl_core.blas import one_blas_thread
 from ssl_core.detection import Detection
 from ssl_core.ego_noise import EgoNoiseSuppressor
 from ssl_core.gcc_phat import LagSteering, band_bins, frame_spectra, summed_phat_cross_spectra
