@@ -64,9 +64,13 @@ def add_check_option(parser) -> None:
                              f"{CHECK_FACTOR}x worse (the stored file is left unchanged)")
 
 
+def _stored_path(name: str, results_dir: str | Path | None) -> Path:
+    return (Path(results_dir) if results_dir is not None else RESULTS_DIR) / f"{name}.json"
+
+
 def stored_for_check(name: str, results_dir: str | Path | None = None) -> tuple[Path, dict | None, str]:
     """The stored result a ``--check`` of this run would compare with: (path, document or None, why not)."""
-    path = (Path(results_dir) if results_dir is not None else RESULTS_DIR) / f"{name}.json"
+    path = _stored_path(name, results_dir)
     if not path.exists():
         return path, None, f"--check: no stored result {path}; run the benchmark without --check first"
     stored = json.loads(path.read_text())
@@ -79,7 +83,7 @@ def stored_for_check(name: str, results_dir: str | Path | None = None) -> tuple[
 
 def stored_argv(name: str, results_dir: str | Path | None = None) -> list[str]:
     """The arguments ``benchmarks/results/<name>.json`` was measured with (a ``--check`` must repeat them)."""
-    path = (Path(results_dir) if results_dir is not None else RESULTS_DIR) / f"{name}.json"
+    path = _stored_path(name, results_dir)
     if not path.exists():
         raise FileNotFoundError(f"no stored result {path}; run benchmarks/bench_{name}.py first")
     return [str(a) for a in json.loads(path.read_text()).get("argv", [])]
