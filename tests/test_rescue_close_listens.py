@@ -97,7 +97,6 @@ def _is_find(at):
     return at is not None and at[0] <= BASE_RADIUS_M and at[1] <= FIND_RADIUS_M
 
 
-@KNOWN_FALSE_FIND
 def test_a_steep_duplicate_of_a_shallow_bearing_is_no_found_cue():
     # A duplicate 35 deg down as loud as the caller's shallow bearing (the floor's image) would put her at the
     # robot's feet; the first declaration is her, where she is.
@@ -122,7 +121,6 @@ class ReverberantLocalizer(FakeLocalizer):
         return Result([Det(d.azimuth, math.radians(-35.0), 0.06, d.level_db, d.voice) for d in res.detections])
 
 
-@KNOWN_FALSE_FIND
 def test_a_steep_bearing_with_a_weak_srp_peak_is_no_found_cue():
     # From beyond 1.5 m she is heard as reverberation, 35 deg down at a weak peak; the first declaration is her.
     caller = Source((2.6, 0.4, 0.1), 64.0)

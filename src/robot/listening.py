@@ -19,11 +19,9 @@ confirms late). ``LISTEN_TRACKER`` is the default tracker configuration (why eac
 Per-listen voice probability: ``VOICE_P`` when the beam's speech-frame fraction reaches ``voice_threshold``,
 else ``NON_VOICE_P``, from the speech the Silero VAD hears in the beam toward the detection
 (``robot.hearing.speech_fractions``: the MPDR + noise suppression chain of ``robot.hearing``, each speech frame
-credited to the beam that owns it). Asymmetric, as in ``robot.hearing``: speech frames are rare but decisive (the
-VAD calls no 1 s chunk of the data set's non-speech test part speech; the pump of dense_pump gave 0 speech frames
-in 29 of 29 listens), while a listen without speech is weak evidence (a caller pauses; and with the
-delay-and-sum beam used before, callers 2-4 m away in the light rubble gave speech frames in 0-12 % of their
-listens, with this chain a talking caller's beam in 84 %: docs/design/behaviour.md, "The sound map").
+credited to the beam that owns it). Both are likelihood ratios measured on the benchmark's train split (see ``VOICE_P``): speech frames are rare
+but decisive (a machine's or an echo's beam has some in 7 % of listens), while a listen without speech is weak
+evidence (a caller pauses: her beam has none in 56 % of her listens).
 Per-track voice probability (``track_voice_probability``, ``Listener.track_voice``): the same per-listen
 log-odds summed over the listens of one track id (prior 0.5), clipped to +-``MAX_TRACK_LOG_ODDS``.
 """
@@ -45,10 +43,14 @@ from ssl_core.tracking import Tracker, TrackerConfig
 __all__ = ["ListenEvidence", "Listen", "Listener", "TrackVoice", "LISTEN_TRACKER", "VOICE_P", "NON_VOICE_P",
            "MAX_TRACK_LOG_ODDS"]
 
-VOICE_P = 0.9          # a listen whose beam is speech (log-odds +2.2)
-NON_VOICE_P = 0.42     # a listen whose beam is not (log-odds -0.32: seven of them undo one with speech)
-# Cap of a track's summed voice log-odds, the sound map's (SoundMapConfig.max_log_odds): three listens with speech
-# (+6.6) or 19 without (-6.1) reach it, and either class can still be overturned by a few listens.
+# Likelihood ratios of one listen, measured on train scenarios 0-47 (tools/fit_voice_evidence.py, rows in
+# experiments/results/voice_evidence/): a bearing within 10 deg of a calling victim has speech in its beam in 44 %
+# of listens, one toward anything else (a machine, an echo, a lobe) in 6.6 %. Log-odds +1.91 [1.62, 2.23] with
+# speech, -0.52 [-0.71, -0.35] without (95 % over scenarios), as probabilities from the prior 0.5:
+VOICE_P = 0.87         # a listen whose beam is speech (log-odds +1.9)
+NON_VOICE_P = 0.37     # a listen whose beam is not (log-odds -0.5: about four of them undo one with speech)
+# Cap of a track's summed voice log-odds, the sound map's (SoundMapConfig.max_log_odds): four listens with speech
+# (+7.6) or twelve without (-6.2) reach it, and either class can still be overturned by a few listens.
 MAX_TRACK_LOG_ODDS = 6.0
 
 # The tracker between listens: one update per 1 s listen, listens 3-7 s apart (a 2-6 s drive between them).

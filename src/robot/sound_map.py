@@ -26,13 +26,12 @@ apart give < 0.3 m):
 
 Class: each inlier listen is independent evidence: the victim probability is the sigmoid of the sum of
 the listens' voice log-odds (prior 0.5), clipped to +-``max_log_odds`` so either class can be overturned.
-With per-listen evidence (``robot.listening``: 0.9 for a listen whose beam had speech, 0.42 for one
-without) one listen with speech outweighs seven without from close up: a caller who pauses stays a victim, a
-machine heard in a dozen listens without a speech frame becomes an interferer. A listen without speech is
-weighed by the VAD's hit rate at its beam level (``silent_*``): a faint beam (below -54 dB re full scale,
-callers 2-4 m away in the light rubble) counts 0.3 as much, since the VAD hears speech in only ~1 in 8 of
-them (a caller heard across the room is not turned into an interferer by the listens in which the VAD
-missed it; a loud machine still is, by its loud silent listens). Victim at or above
+Per-listen evidence (``robot.listening``: ``VOICE_P`` for a listen whose beam had speech, ``NON_VOICE_P`` for one
+without) is the likelihood ratio measured on the benchmark's train split (``tools/fit_voice_evidence.py``): a
+listen with speech adds +1.9, one without -0.5, at every beam level (faint beams are no weaker evidence: a
+calling victim's beam has speech in 56 % of listens below -60 dB re full scale, 35-43 % above -54 dB). One listen
+with speech outweighs about four without: a caller who pauses stays a victim, a machine or an echo heard in a few
+listens without a speech frame becomes an interferer. Victim at or above
 ``victim_probability``, interferer at or below ``interferer_probability``, unknown between.
 State: ``UNVISITED`` -> ``APPROACHING`` -> ``FOUND`` (set by the behaviour), or ``REJECTED`` (visited and
 still no voice: a machine). A found source stays found: rays that associate to it, or a new source born
@@ -97,21 +96,12 @@ class SoundMapConfig:
     max_rays: int = 120                    # history kept per source (newest)
     forget_s: float = 40.0                 # a source with < 3 listens unheard this long is dropped
     victim_probability: float = 0.6        # class thresholds on the accumulated voice probability
-    interferer_probability: float = 0.15   # (0.15: seven listens without speech from the prior)
+    interferer_probability: float = 0.15   # (0.15: four listens without speech from the prior)
     max_log_odds: float = 6.0              # |sum of listen log-odds| cap
     max_range_m: float = 15.0              # no source farther than this from where it was heard
     min_range_m: float = 0.05              # ... nor nearer (horizontally) than this: not inside the array's mast. A
     #                                        mouth can be right below the bumper ring (0.16 m): a caller heard at
     #                                        -67 deg elevation lies 6 cm out, which a 0.2 m floor would refuse
-    # A listen without speech says less the fainter the beam: the VAD hears speech in the beam toward a calling
-    # caller in 32 % of listens at >= -51 dB re full scale but 12 % at -60..-51 dB and 4 % below (measured:
-    # light_rubble_three seeds 0-7 of the simulated capture chain, 499 detections of callers within 15 deg),
-    # so log(1 - hit rate) goes from -0.39 to -0.13 and -0.04. Full weight at and above silent_loud_db, linear
-    # down to silent_faint_weight at silent_faint_db and below. The levels are the capture chain's: measure
-    # them again on a new one (a machine is loud: its silent listens keep their full weight).
-    silent_loud_db: float = -51.0
-    silent_faint_db: float = -54.0
-    silent_faint_weight: float = 0.3
     seed: int = 0                          # RANSAC sampling
     max_table_mb: float = 512.0            # refuse RANSAC tables (hypotheses x rays) that would need more memory
 
@@ -128,7 +118,10 @@ class SoundMapConfig:
     #: Fields that no longer exist (robot.config_values.field_values refuses them, saying where they went).
     RETIRED: ClassVar[dict[str, str]] = {
         "array_height_m": "MOVED: the array's height is robot.mount.ArrayMount.height_m (ssl-robot: --set "
-                          "mount.height_m=...; in simulation the robot model's cube height, set by the simulator)"}
+                          "mount.height_m=...; in simulation the robot model's cube height, set by the simulator)",
+        **{name: "a listen without speech counts the same at every beam level: measured on the train split, faint "
+                 "beams are no weaker evidence (tools/fit_voice_evidence.py)"
+           for name in ("silent_loud_db", "silent_faint_db", "silent_faint_weight")}}
 
     def __post_init__(self) -> None:
         need(self, self.source_height_sigma_m > 0, "source_height_sigma_m", "> 0 m")
@@ -145,8 +138,6 @@ class SoundMapConfig:
              f"in [interferer_probability ({self.interferer_probability}), 1]")
         need(self, self.max_log_odds > 0, "max_log_odds", "> 0")
         need(self, 0 < self.min_range_m < self.max_range_m, "min_range_m", "in (0, max_range_m) m")
-        need(self, self.silent_faint_db < self.silent_loud_db, "silent_faint_db", "< silent_loud_db (dB)")
-        need(self, 0 <= self.silent_faint_weight <= 1, "silent_faint_weight", "in [0, 1]")
         need(self, self.seed >= 0, "seed", "an integer >= 0 (numpy's generators take no negative seed)")
         need(self, self.max_table_mb > 0, "max_table_mb", "> 0 MB")
         if self.ransac_table_mb > self.max_table_mb:
@@ -703,12 +694,7 @@ class SoundMap:
         cfg = self.config
         inl = [r for r, ok in zip(s.rays, s.inliers) if ok] if len(s.inliers) == len(s.rays) else list(s.rays)
         p = np.clip([r.voice_probability for r in inl], 1e-3, 1 - 1e-3)
-        lo = np.log(p / (1 - p))
-        # Evidence against a voice weighed by the VAD's hit rate at the listen's beam level (see the config).
-        level = np.array([r.level_db for r in inl], float)
-        faint = np.clip((cfg.silent_loud_db - level) / (cfg.silent_loud_db - cfg.silent_faint_db), 0.0, 1.0)
-        lo = np.where(lo < 0, lo * (1.0 - faint * (1.0 - cfg.silent_faint_weight)), lo)
-        log_odds = float(np.clip(np.sum(lo), -cfg.max_log_odds, cfg.max_log_odds))
+        log_odds = float(np.clip(np.sum(np.log(p / (1 - p))), -cfg.max_log_odds, cfg.max_log_odds))
         pv = 1.0 / (1.0 + math.exp(-log_odds))
         if pv >= cfg.victim_probability:
             cls = SourceClass.VICTIM
