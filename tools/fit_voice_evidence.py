@@ -1,8 +1,8 @@
 """How much one listen's voice evidence says, measured on the benchmark's train split.
 
 The sound map (``robot.sound_map``) sums one log-odds term per listen that heard a source: ``VOICE_P`` when the
-VAD heard speech in the beam toward the detection (``robot.listening``), ``NON_VOICE_P`` when it did not, the
-latter weighed down for faint beams (``SoundMapConfig.silent_*``). Those terms are likelihood ratios: how much more
+VAD heard speech in the beam toward the detection (``robot.listening``), ``NON_VOICE_P`` when it did not, at every
+beam level. Those terms are likelihood ratios: how much more
 often a bearing toward a calling victim has speech in its beam than a bearing toward anything else (a machine, a
 reflection, a lobe). This tool measures them.
 
@@ -120,7 +120,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--json", help="write the rows and the table here")
     args = ap.parse_args(argv)
     if args.rows_in:
-        rows = load(args.rows_in)["rows"]
+        data = load(args.rows_in)
+        rows, args.first, args.count = data["rows"], data["first"], data["count"]
     else:
         idx = list(range(args.first, args.first + args.count))
         with cf.ProcessPoolExecutor(args.workers, mp_context=mp.get_context("spawn")) as ex:

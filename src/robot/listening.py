@@ -19,9 +19,9 @@ confirms late). ``LISTEN_TRACKER`` is the default tracker configuration (why eac
 Per-listen voice probability: ``VOICE_P`` when the beam's speech-frame fraction reaches ``voice_threshold``,
 else ``NON_VOICE_P``, from the speech the Silero VAD hears in the beam toward the detection
 (``robot.hearing.speech_fractions``: the MPDR + noise suppression chain of ``robot.hearing``, each speech frame
-credited to the beam that owns it). Both are likelihood ratios measured on the benchmark's train split (see ``VOICE_P``): speech frames are rare
-but decisive (a machine's or an echo's beam has some in 7 % of listens), while a listen without speech is weak
-evidence (a caller pauses: her beam has none in 56 % of her listens).
+credited to the beam that owns it). Both are likelihood ratios measured on the benchmark's train split (see
+``VOICE_P``): speech frames are rare but decisive (a machine's or an echo's beam has some in 7 % of listens), while
+a listen without speech is weak evidence (a caller pauses: her beam has none in 56 % of her listens).
 Per-track voice probability (``track_voice_probability``, ``Listener.track_voice``): the same per-listen
 log-odds summed over the listens of one track id (prior 0.5), clipped to +-``MAX_TRACK_LOG_ODDS``.
 """
