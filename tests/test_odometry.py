@@ -257,7 +257,9 @@ DRIFT_RUN_S = 120.0
 
 
 @pytest.mark.slow
-@pytest.mark.parametrize("seed,range_sensors", [(s, False) for s in range(8)] + [(0, True), (1, True)])
+# With range sensors: seeds whose runs meet an obstacle with the rays several times (seed 1 met one once, and with
+# another BLAS thread setting none, which tests the path and not the odometry).
+@pytest.mark.parametrize("seed,range_sensors", [(s, False) for s in range(8)] + [(0, True), (2, True)])
 def test_gyro_aided_odometry_against_mujoco_truth_in_light_rubble(seed, range_sensors):
     """The rescue behaviour for DRIFT_RUN_S in light rubble (bumps, recoveries, pushes against debris, a wheel
     pressing on rubble below the bumper; it keeps exploring after the last find). The issue's "run with bumps" is
