@@ -325,6 +325,26 @@ def test_sim_drive_reports_the_gyro_yaw_rate():
     assert DriveStatus().yaw_rate is None                       # no gyro: the HAL says so
 
 
+def test_sim_drive_commands_the_twist_at_the_serial_links_resolution():
+    """The firmware receives a twist in whole mm/s and mrad/s (SetTwist): the simulated drive commands the wheels
+    exactly so, so twists that differ below that resolution drive the same wheels and the same physics."""
+    from robot.kinematics import twist_to_wheels
+    from ssl_sim.physics import SimDriveBase, SimRobot
+
+    robot = SimRobot()
+    drive = SimDriveBase(robot)
+    wheels = {}
+    for twist in [(0.2004, -0.0496, 0.3), (0.2 + 1e-11, -0.05 - 1e-12, 0.3), (0.1996, -0.0504, 0.3004)]:
+        drive.set_twist(*twist)
+        wheels[twist] = robot.wheel_commands
+    want = twist_to_wheels((0.2, -0.05, 0.3), robot.params)
+    for w in wheels.values():
+        assert w.tolist() == want.tolist()
+    drive.set_twist(0.2006, -0.05, 0.3)                         # past the half step: the next mm/s
+    np.testing.assert_allclose(robot.wheel_commands, twist_to_wheels((0.201, -0.05, 0.3), robot.params),
+                               rtol=1e-12)
+
+
 def test_sim_gyro_bias_drifts_as_a_seeded_random_walk():
     """The simulated bias wanders by gyro_bias_walk * sqrt(t): over 16 seeds and 100 s its change has that spread."""
     import math

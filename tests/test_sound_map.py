@@ -97,6 +97,21 @@ def test_triangulate_two_perpendicular_rays_exact():
     assert np.linalg.norm(pos - p) < 0.05 and inl.all()
 
 
+def test_triangulate_breaks_a_rounding_tie_for_the_first_ray():
+    """Two rays from places 1 m apart that never meet: each ray's own floor point is a hypothesis with one inlier
+    at angle 0 up to float rounding. Which one wins must not hang on the last bits of the arithmetic (another
+    BLAS kernel rounds them differently): the first ray's wins, whatever 1e-12 the directions carry."""
+    o = np.array([[0.0, 0.0, H], [0.0, 1.0, H]])
+    d = np.array([[1.0, -1.0, -0.2], [1.0, 1.0, -0.2]])
+    d /= np.linalg.norm(d, axis=1, keepdims=True)
+    floor0 = o[0] + d[0] * (SoundMapConfig().source_height_m - H) / d[0, 2]
+    rng = np.random.default_rng(7)
+    for _ in range(40):
+        pos, _, inl = triangulate(o, d + rng.normal(scale=1e-12, size=d.shape))
+        assert inl.tolist() == [True, False]
+        assert np.linalg.norm(pos - floor0) < 1e-6, pos
+
+
 def test_found_source_is_never_a_new_source():
     rng = np.random.default_rng(1)
     m = SoundMap()

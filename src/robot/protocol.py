@@ -184,6 +184,15 @@ class SetTwist(Message):
     omega_mrad_s: int = 0
 
 
+TWIST_SCALE = 1000   # SetTwist units per SI unit: mm/s per m/s, mrad/s per rad/s
+
+
+def twist_as_sent(vx: float, vy: float, omega: float) -> tuple[float, float, float]:
+    """The body twist (m/s, m/s, rad/s) at the resolution ``SetTwist`` carries it: 1 mm/s, 1 mrad/s."""
+    return (round(vx * TWIST_SCALE) / TWIST_SCALE, round(vy * TWIST_SCALE) / TWIST_SCALE,
+            round(omega * TWIST_SCALE) / TWIST_SCALE)
+
+
 AZIMUTH_LIMIT_MRAD = 3142   # |azimuth| <= pi, in mrad (the MCU NAKs BAD_VALUE outside)
 
 

@@ -222,6 +222,8 @@ DISTINCT_POSES_M = 0.15   # two listens at least this far apart (horizontally) a
 TRACK_GATE_FACTOR = 2.0   # a ray's chi-square may reach this times gate_chi2 at the source its track id fed
 NEAR_CROSSING_M = 0.5     # a source heard along one ray takes a new ray only where it crosses that ray this far
 #                           (horizontally) from the new ray's origin or farther (see ``SoundMap._along_ray``)
+TIE_RAD = 1e-6            # angles (rad) closer than this are equal when hypotheses are ranked: far below any
+#                           bearing noise, far above the rounding that differs between BLAS kernels (1e-9 rad)
 
 
 def _baseline(rays: Sequence[Listen]) -> float:
@@ -328,9 +330,12 @@ def triangulate(origins, directions, cfg: SoundMapConfig = SoundMapConfig(),
     cand = cand[np.all(np.isfinite(cand), axis=1)]
     err = _ray_angle(o, d, cand)
     inl = err <= math.radians(cfg.inlier_deg)
-    score = inl.sum(1) - np.where(inl, err, 0).sum(1) / math.radians(cfg.inlier_deg) * 1e-3
-    best = cand[int(np.argmax(score))]
-    mask = inl[int(np.argmax(score))]
+    # Most inliers, then the smallest summed inlier angle, counted in whole microradians: hypotheses that agree
+    # to within float rounding (a ray's own height-prior point lies on that ray, angle 0 up to 1e-9 rad) tie
+    # exactly and the first wins. Compared raw, such ties were broken by the last bits of the BLAS kernel's
+    # rounding, and the source's position with them.
+    k = int(np.lexsort((np.round(np.where(inl, err, 0).sum(1) / TIE_RAD), -inl.sum(1)))[0])
+    best, mask = cand[k], inl[k]
     if not np.any(mask):
         mask = np.zeros(n, bool)
         mask[-1] = True

@@ -176,8 +176,8 @@ class SerialDrive(DriveBase):
         """Body twist (m/s, m/s, rad/s, robot frame); the MCU scales it to the wheel-speed limit.
 
         Held while the application sets it again within ``config.command_deadline`` s."""
-        msg = P.SetTwist(_fixed(vx, 1000, "vx (m/s)"), _fixed(vy, 1000, "vy (m/s)"),
-                         _fixed(omega, 1000, "omega (rad/s)"))
+        msg = P.SetTwist(_fixed(vx, P.TWIST_SCALE, "vx (m/s)"), _fixed(vy, P.TWIST_SCALE, "vy (m/s)"),
+                         _fixed(omega, P.TWIST_SCALE, "omega (rad/s)"))
         self._motion(msg, moving=any((msg.vx_mm_s, msg.vy_mm_s, msg.omega_mrad_s)))
 
     def set_heading(self, azimuth: float, speed: float, omega: float = 0.0) -> None:

@@ -10,7 +10,7 @@ import math
 import numpy as np
 
 from robot.hal import Clock, DriveBase, DriveStatus, WheelOdometry
-from robot.protocol import ENCODER_WINDOW_S, GYRO_COUNTS_PER_RAD_S
+from robot.protocol import ENCODER_WINDOW_S, GYRO_COUNTS_PER_RAD_S, twist_as_sent
 from robot.ranging import RangeLayout
 from ssl_sim.physics.sim_robot import SimRobot
 
@@ -86,7 +86,9 @@ class SimDriveBase(DriveBase):
     def set_twist(self, vx: float, vy: float, omega: float) -> None:
         if not np.all(np.isfinite([vx, vy, omega])):
             raise ValueError(f"set_twist: expected finite (vx, vy, omega), got {(vx, vy, omega)}")
-        self.robot.set_twist(vx, vy, omega)
+        # at the serial link's resolution, as the firmware receives it: a twist that differs from another in
+        # its last bits (one BLAS kernel's rounding against another's) then drives the same wheels
+        self.robot.set_twist(*twist_as_sent(vx, vy, omega))
 
     def stop(self) -> None:
         self.robot.stop()
