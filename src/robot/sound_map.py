@@ -330,11 +330,13 @@ def triangulate(origins, directions, cfg: SoundMapConfig = SoundMapConfig(),
     cand = cand[np.all(np.isfinite(cand), axis=1)]
     err = _ray_angle(o, d, cand)
     inl = err <= math.radians(cfg.inlier_deg)
-    # Most inliers, then the smallest summed inlier angle, counted in whole microradians: hypotheses that agree
-    # to within float rounding (a ray's own height-prior point lies on that ray, angle 0 up to 1e-9 rad) tie
-    # exactly and the first wins. Compared raw, such ties were broken by the last bits of the BLAS kernel's
-    # rounding, and the source's position with them.
-    k = int(np.lexsort((np.round(np.where(inl, err, 0).sum(1) / TIE_RAD), -inl.sum(1)))[0])
+    # Most inliers, then the smallest summed inlier angle counted in whole microradians, then the nearest to a
+    # listening place of its inliers. Rays that meet nowhere leave one hypothesis per ray, each ray's own point at
+    # the height prior, with one inlier at angle 0 up to float rounding: compared raw, that tie went to whichever
+    # the BLAS kernel rounded lower. The nearest is the steepest ray's, whose range from elevation is the most
+    # precise (range error ~ height / sin^2(elevation) per radian).
+    near = np.where(inl, np.hypot(*(cand[:, None, :2] - o[None, :, :2]).transpose(2, 0, 1)), np.inf).min(1)
+    k = int(np.lexsort((near, np.round(np.where(inl, err, 0).sum(1) / TIE_RAD), -inl.sum(1)))[0])
     best, mask = cand[k], inl[k]
     if not np.any(mask):
         mask = np.zeros(n, bool)
@@ -374,9 +376,13 @@ def _closest_points(o1, d1, o2, d2, cfg: SoundMapConfig) -> np.ndarray:
     return p
 
 
-def _refine(o: np.ndarray, d: np.ndarray, p0: np.ndarray, cfg: SoundMapConfig, iters: int = 8
+def _refine(o: np.ndarray, d: np.ndarray, p0: np.ndarray, cfg: SoundMapConfig, iters: int = 20
             ) -> tuple[np.ndarray, np.ndarray]:
-    """Gauss-Newton on the (az, el) residuals plus the height prior; returns (p, covariance)."""
+    """Gauss-Newton on the (az, el) residuals plus the height prior; returns (p, covariance).
+
+    Iterates until a step is below 1 nm or ``iters`` steps: near-parallel rays converge slowly (linearly), and a
+    coarse stopping step would make the result jump by that step wherever an input's last bits put the step
+    just above or below it."""
     az_m, el_m = _angles(d)
     w = np.array([1 / math.radians(cfg.bearing_sigma_deg) ** 2, 1 / math.radians(cfg.elevation_sigma_deg) ** 2])
     wz = 1 / cfg.source_height_sigma_m**2
@@ -404,7 +410,7 @@ def _refine(o: np.ndarray, d: np.ndarray, p0: np.ndarray, cfg: SoundMapConfig, i
         if rho[k] < cfg.min_range_m:
             u = v[k] / rho[k] if rho[k] > 1e-9 else d[k, :2] / max(float(np.hypot(*d[k, :2])), 1e-9)
             p[:2] = o[k, :2] + cfg.min_range_m * u
-        if norm < 1e-4:
+        if norm < 1e-9:
             break
     cov = np.linalg.inv(a)
     return p, 0.5 * (cov + cov.T)
