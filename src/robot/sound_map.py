@@ -330,13 +330,11 @@ def triangulate(origins, directions, cfg: SoundMapConfig = SoundMapConfig(),
     cand = cand[np.all(np.isfinite(cand), axis=1)]
     err = _ray_angle(o, d, cand)
     inl = err <= math.radians(cfg.inlier_deg)
-    # Most inliers, then the smallest summed inlier angle counted in whole microradians, then the nearest to a
-    # listening place of its inliers. Rays that meet nowhere leave one hypothesis per ray, each ray's own point at
-    # the height prior, with one inlier at angle 0 up to float rounding: compared raw, that tie went to whichever
-    # the BLAS kernel rounded lower. The nearest is the steepest ray's, whose range from elevation is the most
-    # precise (range error ~ height / sin^2(elevation) per radian).
-    near = np.where(inl, np.hypot(*(cand[:, None, :2] - o[None, :, :2]).transpose(2, 0, 1)), np.inf).min(1)
-    k = int(np.lexsort((near, np.round(np.where(inl, err, 0).sum(1) / TIE_RAD), -inl.sum(1)))[0])
+    # Most inliers, then the smallest summed inlier angle counted in whole microradians, ties to the earliest.
+    # Rays that meet nowhere leave one hypothesis per ray, each ray's own point at the height prior, with one
+    # inlier at angle 0 up to float rounding: compared raw, that tie went to whichever the BLAS kernel rounded
+    # lower. The earliest ray is the one the source was founded on: it stays there until two rays agree elsewhere.
+    k = int(np.lexsort((np.round(np.where(inl, err, 0).sum(1) / TIE_RAD), -inl.sum(1)))[0])
     best, mask = cand[k], inl[k]
     if not np.any(mask):
         mask = np.zeros(n, bool)
