@@ -62,3 +62,45 @@ def test_averaged_poses_of_a_turning_array_are_made_rigid():
     for f, m in zip(fitted, means):
         assert np.abs(dist(f) - dist(ref)).max() < 1e-12            # the fit has the array's exact geometry
         assert np.abs(f - m).max() < 3e-4                           # and stays where the average was
+
+
+# A drive through the simulated base in a child process under the given OpenBLAS kernels: its final pose to the bit.
+_DRIVE = """
+import sys, numpy as np
+from ssl_sim.physics.sim_robot import SimRobot
+r = SimRobot()
+for vx, vy, om in np.round(np.random.default_rng(7).uniform(-0.3, 0.3, (20, 3)), 3):   # the serial link's 1 mm/s
+    r.set_twist(vx, vy, om)
+    r.step(0.1)
+p = r.pose()
+print(repr((p.x, p.y, p.yaw)))
+"""
+
+
+def test_a_simulated_drive_is_the_same_under_every_blas_kernel():
+    """OpenBLAS rounds by the kernel its CPU selects (FMA or not); the wheels' physics turns one last bit of a
+    command into another path, so the drive's arithmetic stays out of BLAS (``robot.kinematics._apply``)."""
+    import importlib.util
+    import os
+    import subprocess
+    import sys
+    from pathlib import Path
+
+    import pytest
+
+    path = Path(__file__).resolve().parents[1] / "benchmarks" / "_blas_kernel.py"
+    spec = importlib.util.spec_from_file_location("_blas_kernel", path)
+    blas = importlib.util.module_from_spec(spec)
+    spec.loader.exec_module(blas)
+    kernels = [k for k in ("Haswell", "Sandybridge") if blas.NEEDS[k] <= blas.cpu_flags()]
+    if len(kernels) < 2:
+        pytest.skip(f"this CPU runs only {kernels or 'none'} of the Haswell and Sandybridge kernels")
+    poses = set()
+    for k in kernels:
+        p = subprocess.run([sys.executable, "-c", _DRIVE], env=dict(os.environ, OPENBLAS_CORETYPE=k),
+                           capture_output=True, text=True, timeout=120)
+        assert p.returncode == 0, p.stderr
+        poses.add(p.stdout.strip())
+    x, y, _ = eval(poses.copy().pop())
+    assert np.hypot(x, y) > 0.05, "the base did not drive"
+    assert len(poses) == 1, poses

@@ -47,9 +47,21 @@ def _matrices(params: OmniDriveParams) -> tuple[np.ndarray, np.ndarray]:
     """(J, J^-1) of ``params``, read-only; cached because odometry converts every encoder reading."""
     th = np.asarray(params.wheel_angles, dtype=float)
     j = np.stack([-np.sin(th), np.cos(th), np.full(3, params.base_radius)], axis=1) / params.wheel_radius
-    j_inv = np.linalg.inv(j)
+    # The inverse by cofactors (columns: cross products of J's rows over det J), not LAPACK: see _apply.
+    cof = np.stack([np.cross(j[1], j[2]), np.cross(j[2], j[0]), np.cross(j[0], j[1])], axis=1)
+    j_inv = cof / np.sum(j[0] * cof[:, 0])
     j.flags.writeable = j_inv.flags.writeable = False
     return j, j_inv
+
+
+def _apply(m: np.ndarray, v: np.ndarray) -> np.ndarray:
+    """``v @ m.T`` for ``v`` of shape (..., 3), rounded the same on every CPU.
+
+    A BLAS matmul rounds by the kernel the CPU selects (with or without fused multiply-add); a wheel command one
+    last bit apart is a different trajectory once contacts amplify it, so a simulated run would depend on the CPU.
+    Elementwise products summed in a fixed order round the same everywhere."""
+    p = v[..., None, :] * m
+    return p[..., 0] + p[..., 1] + p[..., 2]
 
 
 def inverse_kinematics(twist, params: OmniDriveParams = OmniDriveParams()) -> np.ndarray:
@@ -57,7 +69,7 @@ def inverse_kinematics(twist, params: OmniDriveParams = OmniDriveParams()) -> np
     t = np.asarray(twist, dtype=float)
     if t.shape[-1] != 3:
         raise ValueError(f"twist must end in 3 values (vx, vy, omega), got shape {t.shape}")
-    return t @ _matrices(params)[0].T
+    return _apply(_matrices(params)[0], t)
 
 
 def forward_kinematics(wheel_speeds, params: OmniDriveParams = OmniDriveParams()) -> np.ndarray:
@@ -65,7 +77,7 @@ def forward_kinematics(wheel_speeds, params: OmniDriveParams = OmniDriveParams()
     w = np.asarray(wheel_speeds, dtype=float)
     if w.shape[-1] != 3:
         raise ValueError(f"wheel_speeds must end in 3 values, got shape {w.shape}")
-    return w @ _matrices(params)[1].T
+    return _apply(_matrices(params)[1], w)
 
 
 def saturate(wheel_speeds, max_speed: float) -> np.ndarray:

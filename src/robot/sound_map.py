@@ -374,13 +374,9 @@ def _closest_points(o1, d1, o2, d2, cfg: SoundMapConfig) -> np.ndarray:
     return p
 
 
-def _refine(o: np.ndarray, d: np.ndarray, p0: np.ndarray, cfg: SoundMapConfig, iters: int = 20
+def _refine(o: np.ndarray, d: np.ndarray, p0: np.ndarray, cfg: SoundMapConfig, iters: int = 8
             ) -> tuple[np.ndarray, np.ndarray]:
-    """Gauss-Newton on the (az, el) residuals plus the height prior; returns (p, covariance).
-
-    Iterates until a step is below 1 nm or ``iters`` steps: near-parallel rays converge slowly (linearly), and a
-    coarse stopping step would make the result jump by that step wherever an input's last bits put the step
-    just above or below it."""
+    """Gauss-Newton on the (az, el) residuals plus the height prior; returns (p, covariance)."""
     az_m, el_m = _angles(d)
     w = np.array([1 / math.radians(cfg.bearing_sigma_deg) ** 2, 1 / math.radians(cfg.elevation_sigma_deg) ** 2])
     wz = 1 / cfg.source_height_sigma_m**2
@@ -408,7 +404,7 @@ def _refine(o: np.ndarray, d: np.ndarray, p0: np.ndarray, cfg: SoundMapConfig, i
         if rho[k] < cfg.min_range_m:
             u = v[k] / rho[k] if rho[k] > 1e-9 else d[k, :2] / max(float(np.hypot(*d[k, :2])), 1e-9)
             p[:2] = o[k, :2] + cfg.min_range_m * u
-        if norm < 1e-9:
+        if norm < 1e-4:
             break
     cov = np.linalg.inv(a)
     return p, 0.5 * (cov + cov.T)
