@@ -1,9 +1,17 @@
 """What the simulator renders at a pose depends on that pose only, not on what was rendered before in the
 process (caches are keyed on exact geometry: a 2 mm tolerance used to reuse the first array's noise mixing
-and diffuse tail for a slightly different array)."""
+and diffuse tail for a slightly different array); and a drive is the same whichever BLAS kernel the CPU runs."""
 from __future__ import annotations
 
+import ast
+import importlib.util
+import os
+import subprocess
+import sys
+from pathlib import Path
+
 import numpy as np
+import pytest
 
 from ssl_sim.acoustics import AcousticConfig, AcousticSimulator, AmbientNoise, ArrayMount, RobotPose, SensorConfig
 from ssl_sim.acoustics import rir
@@ -66,7 +74,7 @@ def test_averaged_poses_of_a_turning_array_are_made_rigid():
 
 # A drive through the simulated base in a child process under the given OpenBLAS kernels: its final pose to the bit.
 _DRIVE = """
-import sys, numpy as np
+import numpy as np
 from ssl_sim.physics.sim_robot import SimRobot
 r = SimRobot()
 for vx, vy, om in np.round(np.random.default_rng(7).uniform(-0.3, 0.3, (20, 3)), 3):   # the serial link's 1 mm/s
@@ -80,14 +88,6 @@ print(repr((p.x, p.y, p.yaw)))
 def test_a_simulated_drive_is_the_same_under_every_blas_kernel():
     """OpenBLAS rounds by the kernel its CPU selects (FMA or not); the wheels' physics turns one last bit of a
     command into another path, so the drive's arithmetic stays out of BLAS (``robot.kinematics._apply``)."""
-    import importlib.util
-    import os
-    import subprocess
-    import sys
-    from pathlib import Path
-
-    import pytest
-
     path = Path(__file__).resolve().parents[1] / "benchmarks" / "_blas_kernel.py"
     spec = importlib.util.spec_from_file_location("_blas_kernel", path)
     blas = importlib.util.module_from_spec(spec)
@@ -101,6 +101,6 @@ def test_a_simulated_drive_is_the_same_under_every_blas_kernel():
                            capture_output=True, text=True, timeout=120)
         assert p.returncode == 0, p.stderr
         poses.add(p.stdout.strip())
-    x, y, _ = eval(poses.copy().pop())
+    x, y, _ = ast.literal_eval(next(iter(poses)))
     assert np.hypot(x, y) > 0.05, "the base did not drive"
     assert len(poses) == 1, poses
