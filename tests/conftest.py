@@ -1,4 +1,3 @@
-import importlib.util
 import os
 import sys
 from pathlib import Path
@@ -17,11 +16,8 @@ def _pin_blas_kernel() -> None:
     own choice) is kept."""
     if "OPENBLAS_CORETYPE" in os.environ:
         return
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "_blas_kernel.py"
-    spec = importlib.util.spec_from_file_location("_blas_kernel", path)
-    module = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(module)
-    kernel = module.default_kernel()
+    from blas_kernels import kernels
+    kernel = kernels.default_kernel()
     if kernel:
         if "numpy" in sys.modules:  # a plugin loaded numpy first: its kernels are chosen already
             raise RuntimeError("tests/conftest.py: numpy was imported before OPENBLAS_CORETYPE could be pinned; "

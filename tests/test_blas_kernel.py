@@ -2,18 +2,15 @@
 decisions on every x86 machine; a kernel the caller chose is kept."""
 from __future__ import annotations
 
-import importlib.util
 import os
 import subprocess
 import sys
 from pathlib import Path
 
 import pytest
+from blas_kernels import kernels as _blas
 
 TESTS = Path(__file__).resolve().parent
-_spec = importlib.util.spec_from_file_location("_blas_kernel", TESTS.parent / "benchmarks" / "_blas_kernel.py")
-_blas = importlib.util.module_from_spec(_spec)
-_spec.loader.exec_module(_blas)
 
 # what a process that loaded tests/conftest.py then numpy runs: OpenBLAS's own report of its kernels
 _PROBE = ("import sys; sys.path.insert(0, sys.argv[1]); import conftest, numpy; "

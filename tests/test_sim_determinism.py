@@ -4,14 +4,13 @@ and diffuse tail for a slightly different array); and a drive is the same whiche
 from __future__ import annotations
 
 import ast
-import importlib.util
 import os
 import subprocess
 import sys
-from pathlib import Path
 
 import numpy as np
 import pytest
+from blas_kernels import kernels as blas
 
 from ssl_sim.acoustics import AcousticConfig, AcousticSimulator, AmbientNoise, ArrayMount, RobotPose, SensorConfig
 from ssl_sim.acoustics import rir
@@ -88,10 +87,6 @@ print(repr((p.x, p.y, p.yaw)))
 def test_a_simulated_drive_is_the_same_under_every_blas_kernel():
     """OpenBLAS rounds by the kernel its CPU selects (FMA or not); the wheels' physics turns one last bit of a
     command into another path, so the drive's arithmetic stays out of BLAS (``robot.kinematics._apply``)."""
-    path = Path(__file__).resolve().parents[1] / "benchmarks" / "_blas_kernel.py"
-    spec = importlib.util.spec_from_file_location("_blas_kernel", path)
-    blas = importlib.util.module_from_spec(spec)
-    spec.loader.exec_module(blas)
     kernels = [k for k in ("Haswell", "Sandybridge") if blas.NEEDS[k] <= blas.cpu_flags()]
     if len(kernels) < 2:
         pytest.skip(f"this CPU runs only {kernels or 'none'} of the Haswell and Sandybridge kernels")
