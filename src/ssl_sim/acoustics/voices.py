@@ -164,8 +164,7 @@ def _smooth(x: np.ndarray, n: int) -> np.ndarray:
     sum placed at each step - which costs a few kernel lengths instead of a full-length FFT convolution."""
     if n <= 1:
         return x
-    k = np.hanning(n + 2)[1:-1]
-    k /= k.sum()
+    k, kc = _hann_kernel(n)
     x = np.asarray(x, float)
     if x.ndim == 2:
         return np.stack([_smooth(row, n) for row in x]) if len(x) else x
@@ -174,15 +173,26 @@ def _smooth(x: np.ndarray, n: int) -> np.ndarray:
     if steps.size * n > 4 * x.size:  # not piecewise constant (noise): FFT convolution
         return sps.fftconvolve(x, k, mode="same")
     N, off = x.size, (n - 1) // 2  # "same" keeps full-convolution samples off .. off + N - 1
-    kc = np.cumsum(k)
     sh = n - 1 - off
     out = np.zeros(N)
     out[sh:] = x[: N - sh]  # every step's settled part: x delayed by the kernel length minus the centring
-    for j in steps:  # its transition: the kernel's running sum, over the n - 1 samples before it settles
-        t0, t1 = max(0, j - off), min(N, j - off + n - 1)
-        if t0 < t1:
-            out[t0:t1] += jumps[j] * kc[t0 + off - j: t1 + off - j]
+    # each step's transition: the kernel's running sum over the n - 1 samples before it settles, added step
+    # after step (np.add.at keeps that order where transitions overlap)
+    lag = np.arange(n - 1)
+    t = steps[:, None] - off + lag
+    inside = (t >= 0) & (t < N)
+    np.add.at(out, t[inside], (jumps[steps, None] * kc[lag])[inside])
     return out
+
+
+@lru_cache(maxsize=16)
+def _hann_kernel(n: int) -> tuple[np.ndarray, np.ndarray]:
+    """The unit-sum Hann kernel of ``n`` samples and its running sum (read-only: shared between calls)."""
+    k = np.hanning(n + 2)[1:-1]
+    k /= k.sum()
+    kc = np.cumsum(k)
+    k.flags.writeable = kc.flags.writeable = False
+    return k, kc
 
 
 def _bandnoise(rng: np.random.Generator, n: int, band: tuple[float, float], fs: int) -> np.ndarray:

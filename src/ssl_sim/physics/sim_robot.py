@@ -269,11 +269,17 @@ class SimRobot:
         rate is 0."""
         if not window > 0:
             raise ValueError(f"window: expected > 0 s, got {window}")
-        times, yaws = np.array(self._yaw_log).T
-        t1 = times[-1] if end is None else min(float(end), times[-1])
-        t0 = max(t1 - window, times[0])     # the log may not reach back that far (just started or reset)
+        log = self._yaw_log
+        t1 = log[-1][0] if end is None else min(float(end), log[-1][0])
+        t0 = max(t1 - window, log[0][0])     # the log may not reach back that far (just started or reset)
         if t1 <= t0:
             return 0.0
+        # Interpolate in the entries from the last one at or before t0 on: the same brackets as in the whole
+        # log (read every control tick, the whole 256-entry log was most of the read's cost).
+        k = len(log) - 1
+        while k > 0 and log[k][0] > t0:
+            k -= 1
+        times, yaws = np.array([log[j] for j in range(k, len(log))]).T
         y0, y1 = np.interp([t0, t1], times, yaws)
         return float(y1 - y0) / (t1 - t0)
 
