@@ -6,7 +6,7 @@ import pytest
 
 from ssl_sim.acoustics import (SPEAKERS, EventStream, LoopedSignal, ShapedNoise, TimeKeyedNoise, generator_noise,
                                pump_noise, synth_knock, synth_moan, synth_phrase, victim_voice)
-from ssl_sim.acoustics.voices import PHRASES
+from ssl_sim.acoustics.voices import PHRASES, _smooth
 
 FS = 16000
 
@@ -101,3 +101,22 @@ def test_event_stream_silent_periods_and_noise_chunks():
         EventStream(lambda r: np.ones(10), FS, 1.0, 0, p_event=1.5)
     nz = TimeKeyedNoise(9, channels=2, chunk=1000)
     np.testing.assert_array_equal(nz.samples(-1500, 4000)[:, 1500:], nz.samples(0, 2500))
+
+
+def test_phone_track_smoothing_is_the_hann_moving_average():
+    """The voices' track smoothing (a step's transition added per step) equals the direct convolution with the
+    unit-sum Hann kernel, "same" alignment, for piecewise-constant tracks (one step or many, overlapping
+    transitions, steps at the ends) and rows of a 2-D track, and for noise (the FFT path)."""
+    rng = np.random.default_rng(5)
+    for n_len, kernel, n_steps in [(4000, 400, 1), (4000, 400, 30), (3000, 801, 12), (500, 64, 60), (900, 2, 5)]:
+        x = np.zeros(n_len)
+        for at in np.sort(rng.integers(0, n_len, n_steps)):
+            x[at:] += rng.normal()
+        k = np.hanning(kernel + 2)[1:-1]
+        k /= k.sum()
+        np.testing.assert_allclose(_smooth(x, kernel), np.convolve(x, k, "same"), atol=1e-12)
+        rows = np.stack([x, x[::-1], np.zeros(n_len)])
+        np.testing.assert_allclose(_smooth(rows, kernel), [np.convolve(r, k, "same") for r in rows], atol=1e-12)
+    noise = rng.standard_normal(5000)
+    k = np.hanning(802)[1:-1]
+    np.testing.assert_allclose(_smooth(noise, 800), np.convolve(noise, k / k.sum(), "same"), atol=1e-12)

@@ -265,3 +265,24 @@ def test_parked_robot_skips_the_physics_until_commanded():
         moved.append(float(np.hypot(r.pose().x - q.x, r.pose().y - q.y)))
     assert moved[0] == pytest.approx(moved[1], rel=0.01)
     assert moved[0] > 0.15
+
+
+def test_mean_yaw_rate_is_the_yaw_change_over_the_window():
+    """The gyro's window mean: the base's yaw (read from the pose after every step, unwrapped) interpolated
+    linearly between step ends at the window's two ends, over its length; for windows inside the log, reaching
+    before it, and ending between step ends, while the robot spins through +-pi."""
+    r = SimRobot()
+    r.set_twist(0.0, 0.0, 2.5)
+    times, yaws = [r.time], [r.pose().yaw]
+    for k in range(400):
+        r.step(0.0075 if k % 3 else 0.01)   # uneven step lengths, as control ticks and audio chunks make them
+        times.append(r.time)
+        yaws.append(r.pose().yaw)
+    yaws = np.unwrap(yaws)
+    assert yaws[-1] - yaws[0] > 2 * np.pi   # turned more than once: the log unwraps across +-pi
+    for window, end in [(0.1, None), (0.05, None), (0.1, times[-5] - 0.003), (0.02, times[-40] + 0.001), (5.0, None)]:
+        t1 = times[-1] if end is None else end
+        t0 = max(t1 - window, times[-len(r._yaw_log)])   # the log keeps the last 256 step ends
+        expected = (np.interp(t1, times, yaws) - np.interp(t0, times, yaws)) / (t1 - t0)
+        assert r.mean_yaw_rate(window, end) == pytest.approx(expected, rel=1e-9, abs=1e-12)
+    assert 2.0 < r.mean_yaw_rate(0.1) < 2.6   # near the commanded rate (the motors track it within a few %)
