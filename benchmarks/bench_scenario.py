@@ -9,7 +9,9 @@ rendering the microphone signals, localization = ``Localizer.locate``, truth = t
 true poses, detections and finds; the behaviour is the rest: voice evidence, the microphone health monitor, the
 choice of option (paths, exploration, coverage), sound map, occupancy, motion loop and odometry.
 
-Prints a table and one JSON line. Run: ``.venv/bin/python benchmarks/bench_scenario.py [--seeds 0,1,2,3]``.
+Prints a table, each run's fingerprint (``RescueRun.fingerprint``: two versions whose runs print the same
+fingerprints ran them the same to the bit, which is how a pure speed-up is checked) and one JSON line. Run:
+``.venv/bin/python benchmarks/bench_scenario.py [--seeds 0,1,2,3]``.
 Targets: the loop >= 30x faster than real time on one core, the behaviour <= 20 % of it.
 
 ``--fidelity``: what the scenario's acoustic shortcuts cost (``acoustics.obstacle_order``): each caller alone,
@@ -153,7 +155,8 @@ def main(argv: list[str] | None = None) -> int:
         w = r["wall_clock_s"]
         rows.append({"seed": seed, "sim_s": r["sim_time_s"], "setup_s": round(setup, 3), "loop_s": w["loop"],
                      **{p: w[p] for p in PARTS}, "found": f"{r['n_found']}/{r['n_victims']}",
-                     "listens": r["n_listens"], "cpu_s": cpu, "cpu_parts": w["cpu"], "items": items})
+                     "listens": r["n_listens"], "cpu_s": cpu, "cpu_parts": w["cpu"], "items": items,
+                     "fingerprint": r["fingerprint"]})
     sim = sum(r["sim_s"] for r in rows)
     loop = sum(r["loop_s"] for r in rows)
     per = {p: sum(r[p] for r in rows) / sim for p in PARTS}
@@ -178,6 +181,8 @@ def main(argv: list[str] | None = None) -> int:
     rest = cpu_per["other"] - sum(cpu_items.values())
     print("behaviour by item, CPU s per simulated s: " + ", ".join(f"{k} {v:.4f}" for k, v in cpu_items.items())
           + f", the rest (sound map, occupancy, motion loop, odometry, pursuits) {rest:.4f}")
+    print("fingerprints (the same in two versions: the same runs to the bit): "
+          + ", ".join(f"seed {r['seed']} {r['fingerprint']}" for r in rows))
     print(json.dumps({"bench": "scenario", "scenario": sc.name, "seeds": [r["seed"] for r in rows],
                       "sim_s": round(sim, 2), "wall_per_sim_s": round(loop / sim, 4),
                       "realtime_factor": round(sim / loop, 2), "cpu_per_sim_s": round(cpu / sim, 4),
@@ -191,7 +196,9 @@ def main(argv: list[str] | None = None) -> int:
                **{f"behaviour_{k.replace(' ', '_')}_cpu_s_per_sim_s": round(v, 4) for k, v in cpu_items.items()},
                "victims_found": sum(int(r["found"].split("/")[0]) for r in rows),
                "victims": sum(int(r["found"].split("/")[1]) for r in rows)}
-    return finish("scenario", figures, check=args.check, better={"cpu_x_realtime": "higher"})
+    runs = "| seed | simulated s | found | fingerprint |\n|---|---|---|---|\n" + "".join(
+        f"| {r['seed']} | {r['sim_s']} | {r['found']} | {r['fingerprint']} |\n" for r in rows)
+    return finish("scenario", figures, {"runs": runs}, check=args.check, better={"cpu_x_realtime": "higher"})
 
 
 if __name__ == "__main__":

@@ -8,6 +8,7 @@ from __future__ import annotations
 import json
 import math
 import tomllib
+from dataclasses import replace
 from pathlib import Path
 
 import numpy as np
@@ -88,6 +89,21 @@ def test_path_length_matches_the_physics_trajectory():
     # It drove (toward the caller or across her bearing: either way more than a step's worth in 6 s).
     assert seg > 0.3
     assert r["sim_time_s"] >= 6.0 and r["end_reason"] == "time_up"
+
+
+def test_a_runs_fingerprint_changes_with_the_last_bit_of_what_it_did(paper_lab_result):
+    """results.json's fingerprint is the run's: another seed gives another; a trajectory sample moved by one ulp,
+    or a decision's payload changed, gives another (so equal fingerprints mean the same run to the bit)."""
+    run = RescueRun(load_scenario("paper_lab").with_overrides(time_limit_s=6.0), seed=2)
+    r = run.run()
+    assert r["fingerprint"] == run.fingerprint() != paper_lab_result["fingerprint"]
+    t, x, *rest = run.trajectory[-1]
+    run.trajectory[-1] = (t, float(np.nextafter(x, np.inf)), *rest)
+    assert run.fingerprint() != r["fingerprint"]
+    run.trajectory[-1] = (t, x, *rest)
+    assert run.fingerprint() == r["fingerprint"]
+    run.events[0] = replace(run.events[0], reason=run.events[0].reason + " ")
+    assert run.fingerprint() != r["fingerprint"]
 
 
 def test_three_callers_in_light_rubble_found_over_four_seeds():
