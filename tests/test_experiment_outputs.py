@@ -1,5 +1,5 @@
 """``experiments.run_all --quick`` never overwrites the committed full results, and the report's
-"generated at commit" line tells the truth about the source tree."""
+"generated at commit" line and every result's provenance tell the truth about the source tree."""
 from __future__ import annotations
 
 import subprocess
@@ -8,6 +8,7 @@ import pytest
 
 from experiments import run_all as ra
 from experiments.common import QUICK_RESULTS, RESULTS
+from ssl_sim.provenance import git_commit
 
 
 def test_quick_runs_go_to_the_scratch_folder_and_full_runs_to_the_committed_one(tmp_path):
@@ -44,3 +45,30 @@ def test_the_report_states_the_source_state(tmp_path):
     ra.run_all(quick=True, out_dir=tmp_path, only=("none_of_them",))  # no experiment: just the report
     text = (tmp_path / "REPORT.md").read_text()
     assert f"at commit `{ra.source_state()}`" in text and "QUICK mode" in text
+
+
+def test_provenance_is_dirty_for_code_not_for_results_or_prose(tmp_path):
+    """A benchmark run after another (make bench) is not dirty because of the first one's result file; a changed
+    source file, model or scenario makes it dirty."""
+    for rel in ("src/m.py", "benchmarks/results/a.json", "experiments/results/b.csv", "docs/c.md", "README.md",
+                "scenarios/s.toml"):
+        (tmp_path / rel).parent.mkdir(parents=True, exist_ok=True)
+        (tmp_path / rel).write_text("1\n")
+    _git(tmp_path, "init", "-q")
+    _git(tmp_path, "add", ".")
+    _git(tmp_path, "commit", "-qm", "one")
+    head = _git(tmp_path, "rev-parse", "--short=12", "HEAD")
+
+    def state() -> tuple[str, bool]:
+        git_commit.cache_clear()
+        return git_commit(tmp_path)
+
+    assert state() == (head, False)
+    for rel in ("benchmarks/results/a.json", "experiments/results/b.csv", "docs/c.md", "README.md"):
+        (tmp_path / rel).write_text("2\n")
+    assert state() == (head, False)
+    for rel in ("src/m.py", "scenarios/s.toml"):
+        (tmp_path / rel).write_text("2\n")
+        assert state() == (head, True)
+        _git(tmp_path, "checkout", "-q", "--", rel)
+    assert state() == (head, False)
