@@ -32,7 +32,7 @@ def _git(root: Path, *args: str) -> str:
 
 #: Paths whose uncommitted changes cannot change what is measured: the outputs of benchmarks and experiments, and
 #: prose. Without this every benchmark of ``make bench`` after the first was marked dirty by the first one's file.
-NOT_MEASURED = ("benchmarks/results", "experiments/results", "docs", "*.md")
+NOT_MEASURED = ("benchmarks/results/**", "experiments/results/**", "docs/**", "**/*.md")   # git glob pathspecs
 
 
 @functools.lru_cache(maxsize=4)
@@ -40,8 +40,7 @@ def git_commit(root: Path = _SRC_ROOT) -> tuple[str, bool]:
     """(commit hash, uncommitted changes?) of the checkout at ``root`` (its top directory); ("", False) outside git.
     Changes to :data:`NOT_MEASURED` paths do not count: "dirty" says the code, models or scenarios differed."""
     commit = _git(root, "rev-parse", "--short=12", "HEAD")
-    excluded = [f":(top,exclude){p}" for p in NOT_MEASURED if "*" not in p] + \
-        [f":(top,exclude,glob)**/{p}" for p in NOT_MEASURED if "*" in p]
+    excluded = [f":(top,exclude,glob){p}" for p in NOT_MEASURED]
     changed = _git(root, "status", "--porcelain", "--untracked-files=no", "--", ":(top)", *excluded)
     return commit, bool(commit) and bool(changed)
 
