@@ -40,15 +40,21 @@ def load_avg() -> tuple[float, float, float]:
 
 def write_result(name: str, figures: Mapping[str, float], tables: Mapping[str, str] | None = None,
                  out_dir: str | Path | None = None) -> Path:
-    """Write ``<out_dir or benchmarks/results>/<name>.json`` and print its one-line JSON; returns the path."""
+    """Write ``<out_dir or benchmarks/results>/<name>.json`` and print its one-line JSON; returns the path. Replacing
+    a result measured with other arguments (a ``--quick`` run over a full one) is said on stderr."""
     doc = {"benchmark": name, "argv": sys.argv[1:], **provenance(),
            "load_avg": {"start": list(_LOAD_AT_IMPORT), "end": list(load_avg())},
            "figures": dict(figures), "tables": dict(tables or {})}
     out = Path(out_dir) if out_dir is not None else RESULTS_DIR
     out.mkdir(parents=True, exist_ok=True)
     path = out / f"{name}.json"
+    before = json.loads(path.read_text()).get("argv") if path.exists() else None
     path.write_text(json.dumps(doc, indent=1, default=float) + "\n")
     print(json.dumps({"benchmark": name, "figures": doc["figures"], "load_avg": doc["load_avg"]}, default=float))
+    if before is not None and before != doc["argv"]:
+        # a quick or partial run replaced the stored figure: say so, so that it is not committed by accident
+        print(f"note: {path} held a measurement made with arguments {before}; it now holds this run's, made with "
+              f"{doc['argv']} (git checkout {path.name} to keep the stored one)", file=sys.stderr)
     return path
 
 

@@ -65,3 +65,16 @@ def test_stored_arguments_are_what_a_release_check_repeats(stored, monkeypatch):
     # the same arguments again, with --check appended as the Makefile does: compared, not refused
     monkeypatch.setattr(sys, "argv", ["bench_x.py", *_results.stored_argv("x", results_dir=stored), "--check"])
     assert _results.check_result("x", {"cpu_ms": 10.0}, {"cpu_ms": "lower"}, results_dir=stored) == 0
+
+
+def test_replacing_a_figure_measured_with_other_arguments_is_said(stored, monkeypatch, capsys):
+    """A quick or partial run overwrites the stored result (the file records its arguments); stderr says which
+    measurement it replaced, so that it is not committed by accident. The same arguments again: nothing to say."""
+    monkeypatch.setattr(sys, "argv", ["bench_x.py", "--seconds", "5"])
+    _results.write_result("x", {"cpu_ms": 11.0}, out_dir=stored)
+    assert "held a measurement" not in capsys.readouterr().err
+    monkeypatch.setattr(sys, "argv", ["bench_x.py", "--quick"])
+    _results.write_result("x", {"cpu_ms": 12.0}, out_dir=stored)
+    err = capsys.readouterr().err
+    assert "arguments ['--seconds', '5']" in err and "['--quick']" in err
+    assert json.loads((stored / "x.json").read_text())["argv"] == ["--quick"]
