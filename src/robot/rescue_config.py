@@ -24,7 +24,7 @@ class RescueConfig:
     settle_s: float = 0.3                  # standing after a move before listening (s): braking sway, motor decay
     min_power: float = 0.0                 # ignore detections with a lower normalised SRP-PHAT power
     voice_threshold: float = 0.1           # VAD speech-frame fraction of a beam counted as voice (robot.listening)
-    voice_scan_deg: float = 15.0           # > 0: scan for a voice beside a louder non-voice source (robot.listening)
+    voice_scan_deg: float = 0.0            # > 0: scan for a voice beside a louder non-voice source (robot.listening)
     p_find: float = 0.45                   # declare a find at P(victim within 0.5 m of the report) >= this (chosen
     #                                        on the train curve: experiments/found_model/p_find_curve.json)
     step_m: float = 0.6                    # longest move between two listens (m)
