@@ -24,6 +24,9 @@ floor of a seed set.
 Run (background it, it takes long on a shared machine):
 ``nice .venv/bin/python benchmarks/bench_rescue.py --seeds 0:8 [--baseline main] [--workers 2] [--blas K1,K2]``
 ``nice .venv/bin/python benchmarks/bench_rescue.py --suite test --seeds 0 --results-name rescue_suite_test``
+``nice .venv/bin/python benchmarks/bench_rescue.py --suite train --first 200 --count 64 --baseline HEAD --set
+behaviour.voice_scan_deg=15 --results-name ''`` (one setting against the same code: ``--set`` changes only this
+tree's runs)
 """
 from __future__ import annotations
 
@@ -69,16 +72,22 @@ def _scoring():
     return mod
 
 
-def _one(path: str, seed: int, time_limit: float | None, oracle: str = "") -> dict:
+def _one(path: str, seed: int, time_limit: float | None, oracle: str = "", settings: tuple[str, ...] = ()) -> dict:
     """One run of whatever code version is on the path, driven as ``RescueRun.run`` does, but ended and scored by
     this tree's scoring (the run ends when every victim is *found* by its rules, the behaviour finishes or time is
-    up). ``oracle``: an ablation of the robot's hearing by name (``ssl_sim.runner.ORACLES``), '' for none."""
+    up). ``oracle``: an ablation of the robot's hearing by name (``ssl_sim.runner.ORACLES``), '' for none;
+    ``settings``: "SECTION.FIELD=VALUE" replacing the scenario's config fields (``ssl_sim.scenario.parse_setting``)."""
     from robot.rescue import Decision
     from ssl_sim.runner import RescueRun
     from ssl_sim.scenario import load_scenario
     scoring = _scoring()
     t0 = time.process_time()
-    sc = load_scenario(path).with_overrides(seed=None if seed < 0 else seed, time_limit_s=time_limit)
+    if settings:   # only then: an older tree (a baseline) has no settings
+        from ssl_sim.scenario import parse_setting
+        sc = load_scenario(path, dict(map(parse_setting, settings)))
+    else:
+        sc = load_scenario(path)
+    sc = sc.with_overrides(seed=None if seed < 0 else seed, time_limit_s=time_limit)
     if oracle:   # only then: an older tree (a baseline) has no ablations
         from ssl_sim.runner import ORACLES
         run = RescueRun(sc, **ORACLES[oracle])
@@ -128,8 +137,9 @@ def _one(path: str, seed: int, time_limit: float | None, oracle: str = "") -> di
             "position_errors_m": [round(judge.found[k].report_error_m, 4) for k in found]}
 
 
-def worker(paths: list[str], seeds: list[int], workers: int, out: str, oracle: str = "") -> None:
-    tasks = [(p, s, TIME_LIMITS.get(Path(p).stem), oracle) for p in paths for s in seeds]
+def worker(paths: list[str], seeds: list[int], workers: int, out: str, oracle: str = "",
+           settings: tuple[str, ...] = ()) -> None:
+    tasks = [(p, s, TIME_LIMITS.get(Path(p).stem), oracle, tuple(settings)) for p in paths for s in seeds]
     ctx = multiprocessing.get_context("spawn")
     with cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as ex:
         rows = list(ex.map(_one, *zip(*tasks)))
@@ -173,7 +183,7 @@ def _scenario_paths(tmp: Path, old: bool, only: list[str] | None = None, files: 
 
 
 def _start_version(src: Path, paths: list[str], seeds: list[int], workers: int, tmp: Path, tag: str, blas: str,
-                   oracle: str = ""):
+                   oracle: str = "", settings: tuple[str, ...] = ()):
     """Start one code version's runs in a worker process (OpenBLAS kernels ``blas``, '' = the CPU's own choice);
     returns (process, output file)."""
     out = tmp / f"{tag}-{blas or 'cpu'}.json"
@@ -182,7 +192,8 @@ def _start_version(src: Path, paths: list[str], seeds: list[int], workers: int, 
     if blas:
         env["OPENBLAS_CORETYPE"] = blas
     cmd = [sys.executable, __file__, "--worker", str(out), "--workers", str(workers),
-           "--seeds", ",".join(map(str, seeds)), "--paths", *paths] + (["--oracle", oracle] if oracle else [])
+           "--seeds", ",".join(map(str, seeds)), "--paths", *paths] + (["--oracle", oracle] if oracle else []) \
+        + [f"--set={x}" for x in settings]
     return subprocess.Popen(cmd, env=env, cwd=str(ROOT)), out
 
 
@@ -284,6 +295,10 @@ def main(argv: list[str] | None = None) -> int:
                          "than 10 deg from every sounding source, 'localization' gives the behaviour the true "
                          "directions of the sounding sources instead, 'hearing' also the truth's voice evidence "
                          "(ssl_sim.runner.ORACLES)")
+    ap.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE", dest="settings",
+                    help="replace a config field of every scenario in this tree's runs only (the baseline runs the "
+                         "files as they are), e.g. --set behaviour.voice_scan_deg=15 with --baseline HEAD: one "
+                         "setting against the same code; repeatable (ssl_sim.scenario.parse_setting)")
     ap.add_argument("--worker", default=None, help=argparse.SUPPRESS)
     ap.add_argument("--paths", nargs="*", default=None, help=argparse.SUPPRESS)
     args = ap.parse_args(argv)
@@ -292,7 +307,7 @@ def main(argv: list[str] | None = None) -> int:
     if args.results_name is None:
         args.results_name = "" if args.tables_only else "rescue"
     if args.worker:
-        worker(args.paths, seeds, args.workers, args.worker, args.oracle)
+        worker(args.paths, seeds, args.workers, args.worker, args.oracle, tuple(args.settings))
         return 0
     # An OPENBLAS_CORETYPE the caller set is kept, not replaced by the default.
     kernels = check_kernels(args.blas.split(",") if args.blas is not None
@@ -315,6 +330,12 @@ def main(argv: list[str] | None = None) -> int:
             if "--seeds" not in (argv if argv is not None else sys.argv[1:]):
                 seeds = [-1]    # a suite scenario is complete with its seed
         new_paths = _scenario_paths(tmp, old=False, only=only, files=suite_files)
+        if args.settings:   # refused now, by name, rather than in every worker
+            from ssl_sim.scenario import ScenarioError, load_scenario, parse_setting
+            try:
+                load_scenario(new_paths[0], dict(map(parse_setting, args.settings)))
+            except (ScenarioError, ValueError) as exc:
+                raise SystemExit(f"bench_rescue.py: --set: {exc}") from None
         old_paths: list[str] = []
         base_src = None
         if args.baseline or args.baseline_src:
@@ -334,7 +355,7 @@ def main(argv: list[str] | None = None) -> int:
             for blas in ([] if args.tables_only else kernels):
                 # Both versions at once (each with ``workers`` processes): the same seeds, scenario files, kernels.
                 jobs = {"new": _start_version(ROOT / "src", new_paths, seeds, args.workers, tmp, "new", blas,
-                                              args.oracle)}
+                                              args.oracle, tuple(args.settings))}
                 if base_src is not None:
                     jobs["old"] = _start_version(base_src, old_paths, seeds, args.workers, tmp, "old", blas)
                 for tag, job in jobs.items():
@@ -359,6 +380,8 @@ def main(argv: list[str] | None = None) -> int:
     divergence = {tag: stats.kernel_divergence(rs) for tag, rs in rows.items()}
     what = f"suite {args.suite!r} ({len(suite_files)} scenarios)" if args.suite else \
         f"light_rubble_three limited to {TIME_LIMITS['light_rubble_three']:g} s"
+    if args.settings:
+        what += f"; this tree's runs with {', '.join(args.settings)}"
     print(f"seeds {seeds}; {what}; OpenBLAS kernels {', '.join(k or 'the CPU default' for k in kernels)}; scored by "
           "this tree's ssl_sim.scoring (find: report within 0.5 m, base within 1.5 m; SPL to within 1.5 m)\n")
     tables = {"this tree, 95 % intervals over scenarios": _markdown(_interval_rows(summary["new"])),
@@ -383,7 +406,7 @@ def main(argv: list[str] | None = None) -> int:
             figures[f"paired_{c['metric']}_difference_lo"] = c["difference_lo"]
             figures[f"paired_{c['metric']}_difference_hi"] = c["difference_hi"]
         write_result(args.results_name, {k: v for k, v in figures.items() if v is not None}, tables)
-    print(json.dumps({"bench": "rescue", "seeds": seeds, "suite": args.suite, "blas": kernels, "new": new, "old": old,
+    print(json.dumps({"bench": "rescue", "seeds": seeds, "suite": args.suite, "settings": args.settings, "blas": kernels, "new": new, "old": old,
                       "summary": summary, "paired": paired, "divergence": divergence,
                       "wall_s": round(time.perf_counter() - t0, 1)}))
     return 0

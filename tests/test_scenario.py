@@ -7,6 +7,7 @@ from __future__ import annotations
 
 import json
 import math
+import re
 import tomllib
 from dataclasses import replace
 from pathlib import Path
@@ -18,7 +19,7 @@ from scipy.io import wavfile
 from ssl_sim.acoustics.signals import LoopedSignal
 from ssl_sim.cli import main as cli_main
 from ssl_sim.runner import RescueRun, run_scenario
-from ssl_sim.scenario import ScenarioError, load_scenario, parse_scenario, scenario_names
+from ssl_sim.scenario import ScenarioError, load_scenario, parse_scenario, parse_setting, scenario_names
 from ssl_sim.scoring import FreeSpaceGraph
 from ssl_sim.world import Box, Room, World
 
@@ -227,6 +228,29 @@ def test_bad_files_name_the_field(tmp_path, text, field):
         load_scenario(_write(tmp_path, text))
     msg = str(exc.value)
     assert msg.startswith("s.toml: ") and field in msg, msg
+
+
+def test_settings_replace_config_fields_as_the_file_would(tmp_path):
+    """A setting is the same as the field written in the file: validated by the loader, named when wrong."""
+    path = _write(tmp_path, GOOD + "[behaviour]\nlisten_s = 1.5\n")
+    sc = load_scenario(path, dict([parse_setting("behaviour.listen_s=2.0"),
+                                   parse_setting("localizer.band_hz = [300, 4000]"),
+                                   parse_setting("planner.keep_factor=1.25")]))
+    in_file = load_scenario(_write(tmp_path, GOOD + "[behaviour]\nlisten_s = 2.0\n[localizer]\nband_hz = [300, 4000]\n"
+                                              "[planner]\nkeep_factor = 1.25\n", name="in_file.toml"))
+    assert sc.behaviour == in_file.behaviour and sc.localizer == in_file.localizer and sc.planner == in_file.planner
+    assert sc.behaviour.listen_s == 2.0 and sc.localizer.band_hz == (300.0, 4000.0)
+    assert load_scenario(path).behaviour.listen_s == 1.5   # the file itself is not changed
+    for setting, field in (("behaviour.listen_secs=1", "behaviour: unknown key(s) ['listen_secs']"),
+                           ("behaviour.listen_s=-1", "behaviour.listen_s"),
+                           ("localizer.n_sources='three'", "localizer.n_sources: expected an integer")):
+        with pytest.raises(ScenarioError, match=re.escape(field)):
+            load_scenario(path, dict([parse_setting(setting)]))
+    for text, expected in (("scene.name='x'", "section 'scene' cannot be set"),
+                           ("listen_s=2", "expected SECTION.FIELD=VALUE"),
+                           ("behaviour.listen_s=two", "expected a TOML value")):
+        with pytest.raises(ValueError, match=re.escape(expected)):
+            parse_setting(text)
 
 
 def test_unreachable_victim_is_rejected(tmp_path):

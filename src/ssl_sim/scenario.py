@@ -402,8 +402,35 @@ def resolve_scenario_path(name_or_path: str | Path) -> Path:
     return q
 
 
-def load_scenario(name_or_path: str | Path = DEFAULT_SCENARIO) -> Scenario:
-    """Read, validate and return a scenario (its World is built once to check the victims)."""
+#: The tables whose fields a setting (``load_scenario(settings=...)``) may replace: the robot's and the simulation's
+#: configs, not the scene, victims or interferers (a different world, not a different setting of it).
+SETTABLE_SECTIONS = ("localizer", "behaviour", "motion", "sound_map", "planner", "occupancy", "coverage", "pursuit",
+                     "options", "recovery", "acoustics", "noise", "ego_noise")
+
+
+def parse_setting(text: str) -> tuple[str, Any]:
+    """``"SECTION.FIELD=VALUE"`` (VALUE a TOML value: ``15``, ``0.5``, ``true``, ``"text"``, ``[300, 4000]``) ->
+    (``"SECTION.FIELD"``, value). ValueError naming what was expected otherwise."""
+    key, sep, raw = str(text).partition("=")
+    key = key.strip()
+    section, dot, name = key.partition(".")
+    if not sep or not dot or not name or "." in name:
+        raise ValueError(f"setting {text!r}: expected SECTION.FIELD=VALUE, e.g. behaviour.voice_scan_deg=15")
+    if section not in SETTABLE_SECTIONS:
+        raise ValueError(f"setting {text!r}: section {section!r} cannot be set; expected one of {list(SETTABLE_SECTIONS)}")
+    try:
+        value = tomllib.loads(f"v = {raw.strip()}")["v"]
+    except tomllib.TOMLDecodeError:
+        raise ValueError(f"setting {text!r}: expected a TOML value after '=' (a number, true or false, a quoted "
+                         "string or an array)") from None
+    return key, value
+
+
+def load_scenario(name_or_path: str | Path = DEFAULT_SCENARIO, settings: dict[str, Any] | None = None) -> Scenario:
+    """Read, validate and return a scenario (its World is built once to check the victims).
+
+    ``settings``: ``{"SECTION.FIELD": value}`` (see :func:`parse_setting`) replacing fields of the file's config
+    tables before it is validated, as if the file said so: an unknown field or a bad value is refused by name."""
     p = resolve_scenario_path(name_or_path)
     try:
         data = tomllib.loads(p.read_text())
@@ -412,6 +439,14 @@ def load_scenario(name_or_path: str | Path = DEFAULT_SCENARIO) -> Scenario:
     except (OSError, UnicodeDecodeError) as exc:
         raise ScenarioError(f"scenario {p}: cannot read it as TOML text ({getattr(exc, 'strerror', None) or exc})") \
             from None
+    for key, value in (settings or {}).items():
+        section, _, name = key.partition(".")
+        if section not in SETTABLE_SECTIONS or not name:
+            raise ScenarioError(f"settings: {key!r} is no SECTION.FIELD of {list(SETTABLE_SECTIONS)}")
+        table = data.setdefault(section, {})
+        if not isinstance(table, dict):
+            raise ScenarioError(f"{p.name}: {section}: expected a table, got {type(table).__name__}")
+        table[name] = value
     sc = parse_scenario(data, base_dir=p.parent, path=str(p))
     sc.world()  # validates victims/start against the scene
     return sc
