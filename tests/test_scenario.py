@@ -176,6 +176,23 @@ def test_cli_run_writes_results(tmp_path, capsys):
     assert "found 0/1" in printed and "m^2 of reachable floor within 1.5 m" in printed
 
 
+def test_cli_run_set_replaces_a_config_field_and_records_it(tmp_path, capsys):
+    """``--set`` changes what the run does (a 0.5 s settle and a 2 s listen: the first listen ends at 2.5 s, not 1.3 s)
+    and results.json carries the config the run used; a malformed or invalid setting is refused by name."""
+    out = tmp_path / "run"
+    assert cli_main(["run", "paper_lab", "--seed", "1", "--time-limit", "4", "--out", str(out), "--quiet",
+                     "--set", "behaviour.listen_s=2.0", "--set", "behaviour.settle_s=0.5"]) == 0
+    data = json.loads((out / "results.json").read_text())
+    assert data["config"]["behaviour"]["listen_s"] == 2.0 and data["config"]["behaviour"]["settle_s"] == 0.5
+    assert data["listens"][0]["time_s"] == pytest.approx(0.5 + 2.0, abs=0.02)   # settle, then listen (default 1.3 s)
+    capsys.readouterr()
+    assert cli_main(["run", "paper_lab", "--out", str(tmp_path / "bad"), "--set", "behaviour.p_find=1.5"]) == 2
+    assert "behaviour.p_find: expected a probability in (0, 1), got 1.5" in capsys.readouterr().err
+    assert cli_main(["run", "paper_lab", "--out", str(tmp_path / "bad"), "--set", "p_find=0.5"]) == 2
+    assert "--set: setting 'p_find=0.5': expected SECTION.FIELD=VALUE" in capsys.readouterr().err
+    assert not (tmp_path / "bad").exists()
+
+
 # ---------------------------------------------------------------------------- bad files
 def _write(tmp_path: Path, text: str, name: str = "s.toml") -> Path:
     p = tmp_path / name

@@ -42,10 +42,14 @@ def _run(args: argparse.Namespace) -> int:
     from contextlib import ExitStack
 
     from ssl_sim.runner import format_summary, output_dir, run_scenario
-    from ssl_sim.scenario import load_scenario
+    from ssl_sim.scenario import load_scenario, parse_setting
     from ssl_sim.viz import parse_rerun_target
 
-    sc = load_scenario(args.scenario)
+    try:
+        settings = dict(map(parse_setting, args.set))
+    except ValueError as exc:
+        raise ValueError(f"--set: {exc}") from None
+    sc = load_scenario(args.scenario, settings)
     for option, name, value in (("--seed", "seed", args.seed), ("--time-limit", "time_limit_s", args.time_limit)):
         try:
             sc.with_overrides(**{name: value})
@@ -185,6 +189,9 @@ def build_parser() -> argparse.ArgumentParser:
     r.add_argument("--time-limit", type=float, default=None, help="simulated seconds (default: the scenario's)")
     r.add_argument("--rerun", default=None, metavar="save:PATH|spawn|connect[:ADDR]",
                    help="log to rerun: an .rrd file (headless), a spawned viewer or a running one")
+    r.add_argument("--set", action="append", default=[], metavar="SECTION.FIELD=VALUE",
+                   help="replace a field of the scenario's config tables, as if the file said it (e.g. "
+                        "behaviour.p_find=0.6, localizer.n_sources=2); repeatable; results.json records the config")
     r.add_argument("--out", default=None, help="output directory (default out/runs/NAME_seedN)")
     r.add_argument("--json", action="store_true",
                    help="print a one-line JSON summary on stdout (the human-readable summary goes to stderr)")
