@@ -38,7 +38,7 @@ def _component(chunks, entity: str, component: str) -> tuple[np.ndarray, list]:
 @pytest.fixture(scope="module")
 def recorded(tmp_path_factory):
     path = tmp_path_factory.mktemp("rrd") / "run.rrd"
-    sc = load_scenario("light_rubble_three").with_overrides(time_limit_s=12.0)
+    sc = load_scenario("light_rubble_three").with_overrides(time_limit_s=26.0)   # long enough for a first approach target
     run = RescueRun(sc, seed=SEED, logger=RerunLogger(f"save:{path}"))
     result = run.run()
     chunks = RrdReader(path).stream().to_chunks()

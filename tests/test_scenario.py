@@ -108,11 +108,10 @@ def test_a_runs_fingerprint_changes_with_the_last_bit_of_what_it_did(paper_lab_r
 
 
 def test_three_callers_in_light_rubble_found_over_four_seeds():
-    """Seeds 0-3 of the shipped scenario (240 s): at least 9 of the 12 callers found, at most 5 false finds. Over
-    seeds, not one run: a run is chaotic (one different listen changes the path). Measured: 9 of 12 and 5 false
-    finds; 10 and 4 with the same behaviour before the simulated drive computed its wheel commands outside BLAS
-    and at the serial link's resolution, which gives every run another path (docs/design/behaviour.md, "Closed-loop
-    runs are chaotic", has the paired comparison over the train split)."""
+    """Seeds 0-3 of the shipped scenario (240 s): at least 9 of the 12 callers found, at most 7 false finds. Over
+    seeds, not one run: a run is chaotic (one different listen changes the path). Measured: 9 of 12 and 7 false
+    finds with the robot's relative threshold of 0.5; 9 and 5 with 0.3, which over all the shipped scenes made as
+    many false finds per run (0.58) and found fewer victims (docs/design/behaviour.md)."""
     found, false = 0, 0
     for seed in range(4):
         r = run_scenario("light_rubble_three", seed=seed)
@@ -126,8 +125,8 @@ def test_three_callers_in_light_rubble_found_over_four_seeds():
         costs = r["wall_clock_s"]
         assert costs["physics"] > 0 and costs["acoustics"] > 0 and costs["localization"] > 0
     # False finds: the fitted found model's measured limit (docs/design/behaviour.md, "What the fit says"):
-    # 4-5 in these 4 runs (reports 0.5-1.5 m from a caller); the behaviour tuned on this scene had none.
-    assert found >= 9 and false <= 5, (found, false)
+    # 5-7 in these 4 runs (reports 0.5-1.5 m from a caller); the behaviour tuned on this scene had none.
+    assert found >= 9 and false <= 7, (found, false)
 
 
 def test_grid_geodesic_goes_around_a_wall():
