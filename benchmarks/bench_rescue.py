@@ -11,7 +11,8 @@ generated suite's (``ssl_sim.suite.write_scenarios``). Prints, per version: ever
 with its 95 % bootstrap interval over scenarios (``ssl_sim.stats``); per scenario victims found and reached,
 runs with all found, mean SPL, false finds per run, runs ending "stuck", position error of found victims;
 the paired difference this tree - baseline over the same scenarios ("outside chance" only when its interval
-excludes 0); the share of runs whose outcome differs between two BLAS kernels; then one JSON line.
+excludes 0); the share of runs whose outcome differs between two BLAS kernels; then one JSON line. Each run is
+reported on stderr as it ends.
 
 **Reproducible across x86 machines**: OpenBLAS picks its kernels by CPU (SkylakeX on AVX-512 Intel parts, Haswell
 on AMD Zen), and their last-bit rounding differences grow, through thresholds in the closed loop, into other
@@ -141,8 +142,13 @@ def worker(paths: list[str], seeds: list[int], workers: int, out: str, oracle: s
            settings: tuple[str, ...] = ()) -> None:
     tasks = [(p, s, TIME_LIMITS.get(Path(p).stem), oracle, tuple(settings)) for p in paths for s in seeds]
     ctx = multiprocessing.get_context("spawn")
+    rows = []
     with cf.ProcessPoolExecutor(max_workers=workers, mp_context=ctx) as ex:
-        rows = list(ex.map(_one, *zip(*tasks)))
+        for r in ex.map(_one, *zip(*tasks)):
+            rows.append(r)
+            # progress on stderr (the tables come at the end of a run that can take half an hour)
+            print(f"{Path(out).stem}: {len(rows)}/{len(tasks)} {r['scenario']} seed {r['seed']}: {r['n_found']}/"
+                  f"{r['n_victims']} found, {r['false_finds']} false, {r['cpu_s']} CPU s", file=sys.stderr, flush=True)
     Path(out).write_text(json.dumps(rows))
 
 
