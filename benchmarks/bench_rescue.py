@@ -7,7 +7,8 @@ Every version is ended and scored by *this* tree's ``ssl_sim/scoring.py`` (loade
 process too): a find is a report within 0.5 m of an unfound victim with the base within 1.5 m of her, SPL on
 the one free-space graph (``docs/design/scoring.md``). Scenario files are always this tree's (the old code runs
 the same scenarios; sections it does not know are removed from a temporary copy), or with ``--suite SPLIT`` a
-generated suite's (``ssl_sim.suite.write_scenarios``). Prints, per version: every metric per scene family
+generated suite's (``ssl_sim.suite.write_scenarios``); ``--baseline-scenarios own`` gives the baseline its own
+tree's files instead, so a changed robot profile or scenario config is compared too. Prints, per version: every metric per scene family
 with its 95 % bootstrap interval over scenarios (``ssl_sim.stats``); per scenario victims found and reached,
 runs with all found, mean SPL, false finds per run, runs ending "stuck", position error of found victims;
 the paired difference this tree - baseline over the same scenarios ("outside chance" only when its interval
@@ -188,6 +189,29 @@ def _scenario_paths(tmp: Path, old: bool, only: list[str] | None = None, files: 
     return out
 
 
+def _own_scenario_paths(base_src: Path, tmp: Path, names: list[str], args) -> list[str]:
+    """The baseline tree's own files for the scenarios ``names`` (``--baseline-scenarios own``): its shipped ones,
+    or its generator's suite written with its own code (its robot profile, its draws)."""
+    if args.suite:
+        code = ("import sys; from ssl_sim.suite import write_scenarios; "
+                "print('\\n'.join(map(str, write_scenarios(*sys.argv[1:3], None if sys.argv[3] == '-' else "
+                "int(sys.argv[3]), int(sys.argv[4])))))")
+        out = subprocess.run([sys.executable, "-c", code, args.suite, str(tmp / "baseline_suite"),
+                              str(args.count) if args.count is not None else "-", str(args.first)],
+                             env=dict(os.environ, PYTHONPATH=str(base_src)), capture_output=True, text=True)
+        if out.returncode != 0:
+            raise SystemExit(f"bench_rescue.py: --baseline-scenarios own: the baseline cannot write the {args.suite!r} "
+                             f"suite:\n{out.stderr.strip()[-2000:]}")
+        paths = out.stdout.split()
+    else:
+        paths = [str(base_src / "ssl_sim" / "scenarios" / f"{n}.toml") for n in names]
+    missing = [p for p in paths if not Path(p).exists()]
+    if len(paths) != len(names) or missing or [Path(p).stem for p in paths] != names:
+        raise SystemExit(f"bench_rescue.py: --baseline-scenarios own: the baseline's scenarios "
+                         f"{[Path(p).stem for p in paths]} are not this tree's {names} (missing: {missing})")
+    return paths
+
+
 def _start_version(src: Path, paths: list[str], seeds: list[int], workers: int, tmp: Path, tag: str, blas: str,
                    oracle: str = "", settings: tuple[str, ...] = ()):
     """Start one code version's runs in a worker process (OpenBLAS kernels ``blas``, '' = the CPU's own choice);
@@ -280,6 +304,10 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--baseline", default="main", help="git ref of the old behaviour ('' = skip it)")
     ap.add_argument("--baseline-src", default=None,
                     help="or the src directory of a checkout of the old behaviour (with its models/, data/ beside)")
+    ap.add_argument("--baseline-scenarios", choices=("this", "own"), default="this",
+                    help="which scenario files the baseline runs: this tree's (default: the same worlds and robot "
+                         "configs, so only the code differs) or its own tree's shipped files or generated suite "
+                         "(also a changed [localizer], [behaviour] or suite profile differs)")
     ap.add_argument("--workers", type=int, default=2)
     ap.add_argument("--scenarios", default=None, help="comma list of scenario names (default: all shipped ones)")
     ap.add_argument("--suite", default=None, help="run a generated suite's split (train | test) instead of the "
@@ -355,7 +383,10 @@ def main(argv: list[str] | None = None) -> int:
                                       capture_output=True).stdout
                 subprocess.run(["tar", "-x", "-C", str(base)], input=arch, check=True)
                 base_src = base / "src"
-            old_paths = _scenario_paths(tmp, old=True, only=only, files=suite_files)
+            if args.baseline_scenarios == "own":
+                old_paths = _own_scenario_paths(base_src, tmp, [Path(p).stem for p in new_paths], args)
+            else:
+                old_paths = _scenario_paths(tmp, old=True, only=only, files=suite_files)
         rows: dict[str, list[dict]] = {"new": []}
         try:
             for blas in ([] if args.tables_only else kernels):
