@@ -76,6 +76,8 @@ def test_bad_configuration_and_actions_are_named():
         SSLRescueEnv(n_victim=2)
     with pytest.raises(ValueError, match="RewardConfig.found"):
         RewardConfig(found=-1.0)
+    with pytest.raises(ValueError, match="EnvConfig.rel_threshold"):
+        EnvConfig(rel_threshold=float("nan"))
     env = SSLRescueEnv(SMALL_CFG)
     with pytest.raises(RuntimeError, match="before reset"):
         env.step(FORWARD)
@@ -84,6 +86,18 @@ def test_bad_configuration_and_actions_are_named():
         env.step(np.array([1.0, 0.0]))
     with pytest.raises(ValueError, match="action"):
         env.step(np.array([np.nan, 0.0, 0.0]))
+
+
+def test_relative_threshold_one_keeps_only_the_strongest_detection():
+    """rel_threshold: a detection after the first needs this fraction of the strongest one's SRP power, so at 1.0
+    no second one passes (ties aside), where 0 lets a second caller through in the same steps."""
+    counts = {}
+    for rel in (0.0, 1.0):
+        env = SSLRescueEnv(EnvConfig(n_victims=3, min_start_distance_m=1.0), rel_threshold=rel, min_power=0.0)
+        obs, _ = env.reset(seed=0)
+        masks = [obs["detection_mask"]] + [env.step(TURN_LEFT)[0]["detection_mask"] for _ in range(6)]
+        counts[rel] = [int(np.sum(m)) for m in masks]
+    assert max(counts[1.0]) == 1 and max(counts[0.0]) > 1, counts
 
 
 def test_same_seed_same_episode_different_seed_different_scene():

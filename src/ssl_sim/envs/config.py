@@ -92,6 +92,7 @@ class EnvConfig:
     resolution_deg: float = 2.0          # detection refinement grid spacing
     n_detections: int = 3                # K: top-K detections reported
     min_power: float = 0.05              # detection threshold (normalised SRP)
+    rel_threshold: float = 0.3           # a 2nd..Kth detection's SRP power >= this x the strongest one's
     include_audio: bool = False          # add the raw multichannel audio of the listen window
     # -- task -------------------------------------------------------------------------------------
     found_radius_m: float = 0.75        # horizontal distance robot centre - mouth that finds a victim
@@ -132,6 +133,7 @@ class EnvConfig:
              f"> 0 and <= coarse_resolution_deg ({self.coarse_resolution_deg})")
         need(isinstance(self.n_detections, int) and 1 <= self.n_detections <= 8, "n_detections", "an integer 1..8")
         need(0 <= self.min_power < 1, "min_power", "0 <= power < 1")
+        need(0 <= self.rel_threshold <= 1, "rel_threshold", "a fraction of the strongest detection's power in [0, 1]")
         need(0 < self.found_radius_m <= FIND_BASE_RADIUS_M, "found_radius_m",
              f"0 < m <= {FIND_BASE_RADIUS_M} (a find needs the robot within that of her, ssl_sim.scoring)")
         need(0 < self.tip_limit_deg < 90, "tip_limit_deg", "0 < deg < 90")

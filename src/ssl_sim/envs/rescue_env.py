@@ -138,7 +138,7 @@ def localizer_config(config: EnvConfig) -> LocalizerConfig:
     """The SRP-PHAT settings behind the observation."""
     return LocalizerConfig(fs=FS, coarse_resolution_deg=config.coarse_resolution_deg,
                            resolution_deg=config.resolution_deg, n_sources=config.n_detections,
-                           min_power=config.min_power, rel_threshold=0.3,
+                           min_power=config.min_power, rel_threshold=config.rel_threshold,
                            min_separation_deg=max(20.0, 2 * config.coarse_resolution_deg))
 
 
