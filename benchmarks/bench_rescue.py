@@ -8,12 +8,12 @@ process too): a find is a report within 0.5 m of an unfound victim with the base
 the one free-space graph (``docs/design/scoring.md``). Scenario files are always this tree's (the old code runs
 the same scenarios; sections it does not know are removed from a temporary copy), or with ``--suite SPLIT`` a
 generated suite's (``ssl_sim.suite.write_scenarios``); ``--baseline-scenarios own`` gives the baseline its own
-tree's files instead, so a changed robot profile or scenario config is compared too. Prints, per version: every metric per scene family
-with its 95 % bootstrap interval over scenarios (``ssl_sim.stats``); per scenario victims found and reached,
-runs with all found, mean SPL, false finds per run, runs ending "stuck", position error of found victims;
-the paired difference this tree - baseline over the same scenarios ("outside chance" only when its interval
-excludes 0); the share of runs whose outcome differs between two BLAS kernels; then one JSON line. Each run is
-reported on stderr as it ends.
+tree's files instead, so a changed robot profile or scenario config is compared too. Prints, per version: every
+metric per scene family with its 95 % bootstrap interval over scenarios (``ssl_sim.stats``); per scenario victims
+found and reached, runs with all found, mean SPL, false finds per run, runs ending "stuck", position error of
+found victims; the paired difference this tree - baseline over the same scenarios ("outside chance" only when its
+interval excludes 0); the share of runs whose outcome differs between two BLAS kernels; then one JSON line. Each
+run is reported on stderr as it ends.
 
 **Reproducible across x86 machines**: OpenBLAS picks its kernels by CPU (SkylakeX on AVX-512 Intel parts, Haswell
 on AMD Zen), and their last-bit rounding differences grow, through thresholds in the closed loop, into other
