@@ -206,7 +206,7 @@ def _own_scenario_paths(base_src: Path, tmp: Path, names: list[str], args) -> li
     else:
         paths = [str(base_src / "ssl_sim" / "scenarios" / f"{n}.toml") for n in names]
     missing = [p for p in paths if not Path(p).exists()]
-    if len(paths) != len(names) or missing or [Path(p).stem for p in paths] != names:
+    if missing or [Path(p).stem for p in paths] != names:
         raise SystemExit(f"bench_rescue.py: --baseline-scenarios own: the baseline's scenarios "
                          f"{[Path(p).stem for p in paths]} are not this tree's {names} (missing: {missing})")
     return paths
