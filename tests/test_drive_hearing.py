@@ -185,6 +185,8 @@ def test_a_rescue_run_that_hears_while_driving_uses_its_own_found_model_and_hear
     # callers' detections heard while driving are as accurate as those heard standing
     assert len(r["listens"]) >= b.drive_hearing.windows + 3
     moving_times = {round(e.time, 2) for e in driving}
+    # the runner's own flag (the array moved over the window, from the simulator's poses) marks the same windows
+    assert {round(rec["time_s"], 2) for rec in r["listens"] if rec["moving"]} == moving_times
     errors = {True: [], False: []}
     for rec in r["listens"]:
         errors[round(rec["time_s"], 2) in moving_times] += [d["error_deg"] for d in rec["detections"]

@@ -20,7 +20,7 @@ What is measured (all from the simulator's truth, never from the robot's own est
   the robot centre can stand, reachable from the start (0: no behaviour can be credited with her).
 * **listens**: every localization with its detections against the true directions of all
   sources in the ARRAY frame at the listening pose (each detection is matched to the nearest
-  source that was sounding during the block; errors in degrees).
+  source that was sounding during the block; errors in degrees); ``moving``: heard while driving.
 * **wall clock**: seconds spent in physics (MuJoCo and the simulated drive's sensors: what hardware does on the
   robot), acoustics, localization, the runner's truth bookkeeping (``truth``) and the rest (``other``: the
   behaviour, with its voice evidence); under ``cpu`` the same split in CPU seconds of this process (a machine
@@ -193,6 +193,9 @@ def _unit(az: float, el: float) -> np.ndarray:
 # ----------------------------------------------------------------------------- the run
 #: A source sounds in a window when its own signal does in at least this share of the window's 10 ms frames.
 SOUNDING_FRACTION = 0.1
+#: A listen whose window moved the array more than this (m) was heard while driving (``listens[i]["moving"]``): a
+#: parked robot creeps by millimetres, a drive at 0.25 m/s moves it 0.25 m in a 1 s window.
+MOVING_M = 0.02
 
 #: Ablations of the robot's hearing by name (``benchmarks/bench_rescue.py --oracle``, ``tools/failure_breakdown.py
 #: --oracle``): the ``RescueRun`` switches each sets.
@@ -355,6 +358,16 @@ class RescueRun:
                 return (poses[k] if poses else self.robot.array_pose()), (start, int(n_samples))
         return self.robot.array_pose(), (start, int(n_samples))
 
+    def _moved_m(self, n_samples: int) -> float:
+        """How far (m) the array centre moved over the window of the last ``n_samples`` samples read (0 for a
+        window of one pose: a listen standing still)."""
+        if not self._blocks:
+            return 0.0
+        n0, n, _ = self._blocks[-1]
+        start = n0 + n - int(n_samples)
+        poses = [p for b0, bn, ps in self._blocks if b0 + bn > start for p in (ps or ())]
+        return float(np.linalg.norm(poses[-1][0] - poses[0][0])) if len(poses) > 1 else 0.0
+
     def _sources_heard(self, n_samples: int) -> tuple[np.ndarray, np.ndarray, np.ndarray, np.ndarray]:
         """Every source's azimuth, elevation (rad, array frame) and distance (m) at the middle of the window of the
         last ``n_samples`` samples read (a parked robot creeps slightly; a driving one moves), and the fraction of
@@ -460,6 +473,7 @@ class RescueRun:
                             "elevation_error_deg": _deg(d.elevation - el[j])})
             dets.append(row)
         rec = {"time_s": _r(t, 3), "pose": [_r(pose.x), _r(pose.y), _r(pose.yaw, 4)],
+               "moving": self._moved_m(n_samples) > MOVING_M,
                "level_db": _r(res.level_db, 2), "active_frames": int(res.active_frames),
                "sources": [{k: v for k, v in s.items() if k != "direction"} for s in truth],
                "detections": [{k: v for k, v in d.items() if k != "direction"} for d in dets]}
