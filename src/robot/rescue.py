@@ -190,15 +190,16 @@ class RescueBehaviour(Mission):
         the coverage. The drive goes on while the option it serves is still the one worth most (the current
         target keeps its ``keep_factor``); else it ends here and the next cycle listens standing and decides."""
         pose = np.array(pose_at(trajectory, 0.5 * (trajectory[0, 0] + trajectory[-1, 0])))
-        self._believe(res, pose, float(trajectory[-1, 0]), "while driving: ")
+        self._believe(res, pose, float(trajectory[-1, 0]), "while driving: ", moving=True)
         o = self._choose()
         return (o.kind, None if o.source is None else o.source.id) == self._doing
 
-    def _believe(self, res: Listen, pose: np.ndarray, now: float, prefix: str = "") -> dict[int, ListenEvidence]:
+    def _believe(self, res: Listen, pose: np.ndarray, now: float, prefix: str = "", moving: bool = False
+                 ) -> dict[int, ListenEvidence]:
         """A listen heard at ``pose`` (odometry frame) into the map and the coverage, and its event; returns its
         evidence by unfound source id."""
         heard, cands, ignored = {}, [], list(res.ignored)
-        for ev, sid in self.map.update(res.evidence, pose, now):
+        for ev, sid in self.map.update(res.evidence, pose, now, moving):
             s = self.map.source(sid)
             if s.state is SourceState.FOUND:
                 ignored.append(f"az {math.degrees(ev.azimuth):+.0f} deg el {math.degrees(ev.elevation):+.0f} deg "

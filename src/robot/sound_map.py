@@ -17,7 +17,8 @@ apart give < 0.3 m):
 * robust: RANSAC over ray pairs (and single rays with the height prior) picks the hypothesis with most
   rays within ``inlier_deg``; Gauss-Newton refines on those inliers; rays off by more (reflections,
   occlusion in rubble: An et al. ICRA 2018 measure 0.8 m errors from them) are kept but ignored;
-* covariance: the inverse of the Gauss-Newton normal matrix at the bearing noise ``bearing_sigma_deg``;
+* covariance: the inverse of the Gauss-Newton normal matrix at the bearing noise ``bearing_sigma_deg``
+  (elevation: ``elevation_sigma_deg``; a ray heard while driving ``moving_elevation_sigma_deg``);
 * association of a new ray: Mahalanobis gate on the (azimuth, elevation) innovation with
   ``S = H P H^T + R`` (chi-square, 2 degrees of freedom) -- a source known only along one ray accepts a
   ray from a new pose anywhere along that first ray. The track id is a second association: a track that fed a
@@ -87,6 +88,11 @@ class SoundMapConfig:
     bearing_sigma_deg: float = 5.0         # azimuth noise of one listen (SRP-PHAT in RT60 0.6 s rubble: median
     #                                        errors 2-5 deg in the shipped runs' listens)
     elevation_sigma_deg: float = 8.0       # elevation is worse on the cube (floor reflections)
+    # A bearing heard while driving: its elevation reads low by a bias shared by the drive's windows (-2.9 / -2.4 deg
+    # mean at 1-2 / 2-3 m against -1.0 / -0.4 standing, docs/design/ego_noise.md), which a dozen such rays do not
+    # average away. Three times the standing noise: nine of them weigh in elevation as one standing listen, so the
+    # source's range comes from the standing listens and the drive's azimuths.
+    moving_elevation_sigma_deg: float = 24.0
     inlier_deg: float = 12.0               # RANSAC: a ray this close to the hypothesis supports it
     gate_chi2: float = 13.8                # association gate: chi-square 2 dof, 99.9 %
     ransac_hypotheses: int = 96            # random ray pairs per refit (plus every single ray)
@@ -127,6 +133,7 @@ class SoundMapConfig:
         need(self, self.source_height_sigma_m > 0, "source_height_sigma_m", "> 0 m")
         need(self, 0 < self.bearing_sigma_deg < 45, "bearing_sigma_deg", "in (0, 45) degrees")
         need(self, 0 < self.elevation_sigma_deg < 45, "elevation_sigma_deg", "in (0, 45) degrees")
+        need(self, 0 < self.moving_elevation_sigma_deg < 90, "moving_elevation_sigma_deg", "in (0, 90) degrees")
         need(self, 0 < self.inlier_deg < 90, "inlier_deg", "in (0, 90) degrees")
         need(self, self.gate_chi2 > 0, "gate_chi2", "> 0")
         need(self, self.ransac_hypotheses >= 1, "ransac_hypotheses", "an integer >= 1")
@@ -162,6 +169,7 @@ class Listen:
     voice_probability: float
     level_db: float
     activity: float
+    moving: bool = False           # heard while the robot drove (its elevation is less certain)
 
 
 @dataclass(frozen=True)
@@ -305,14 +313,20 @@ def _ray_angle(origins: np.ndarray, dirs: np.ndarray, points: np.ndarray) -> np.
 
 
 def triangulate(origins, directions, cfg: SoundMapConfig = SoundMapConfig(),
-                rng: np.random.Generator | None = None) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
+                rng: np.random.Generator | None = None, elevation_sigma_deg=None
+                ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Robust position of one source from rays (world frame): ``(position (3,), covariance (3, 3), inliers (n,))``.
 
-    ``origins``: (n, 3) array centres (m); ``directions``: (n, 3) unit vectors toward the source."""
+    ``origins``: (n, 3) array centres (m); ``directions``: (n, 3) unit vectors toward the source;
+    ``elevation_sigma_deg``: (n,) each ray's elevation noise (deg; None: ``cfg.elevation_sigma_deg`` for all)."""
     o = np.asarray(origins, float).reshape(-1, 3)
     d = np.asarray(directions, float).reshape(-1, 3)
     if len(o) != len(d) or not len(o):
         raise ValueError(f"origins/directions: expected the same number (>= 1) of rays, got {len(o)} and {len(d)}")
+    el_sigma = np.full(len(o), cfg.elevation_sigma_deg) if elevation_sigma_deg is None \
+        else np.asarray(elevation_sigma_deg, float).reshape(-1)
+    if len(el_sigma) != len(o):
+        raise ValueError(f"elevation_sigma_deg: expected one per ray ({len(o)}), got {len(el_sigma)}")
     d = d / np.linalg.norm(d, axis=1, keepdims=True)
     rng = rng if rng is not None else np.random.default_rng(cfg.seed)
     hyp = [_on_prior_height(o, d, cfg)]
@@ -342,10 +356,10 @@ def triangulate(origins, directions, cfg: SoundMapConfig = SoundMapConfig(),
     if _spread(o[mask]) < DISTINCT_POSES_M:   # all from one place: no parallax at all
         p, cov = _along_mean_ray(o[mask], d[mask], cfg)
         return p, cov, _ray_angle(o, d, p[None])[0] <= math.radians(cfg.inlier_deg)
-    p, cov = _refine(o[mask], d[mask], best, cfg)
+    p, cov = _refine(o[mask], d[mask], best, cfg, el_sigma[mask])
     mask = _ray_angle(o, d, p[None])[0] <= math.radians(cfg.inlier_deg)
     if np.any(mask):
-        p, cov = _refine(o[mask], d[mask], p, cfg)
+        p, cov = _refine(o[mask], d[mask], p, cfg, el_sigma[mask])
     return p, cov, mask
 
 
@@ -374,11 +388,13 @@ def _closest_points(o1, d1, o2, d2, cfg: SoundMapConfig) -> np.ndarray:
     return p
 
 
-def _refine(o: np.ndarray, d: np.ndarray, p0: np.ndarray, cfg: SoundMapConfig, iters: int = 8
-            ) -> tuple[np.ndarray, np.ndarray]:
-    """Gauss-Newton on the (az, el) residuals plus the height prior; returns (p, covariance)."""
+def _refine(o: np.ndarray, d: np.ndarray, p0: np.ndarray, cfg: SoundMapConfig, el_sigma_deg: np.ndarray,
+            iters: int = 8) -> tuple[np.ndarray, np.ndarray]:
+    """Gauss-Newton on the (az, el) residuals plus the height prior; returns (p, covariance).
+    ``el_sigma_deg``: (n,) each ray's elevation noise."""
     az_m, el_m = _angles(d)
-    w = np.array([1 / math.radians(cfg.bearing_sigma_deg) ** 2, 1 / math.radians(cfg.elevation_sigma_deg) ** 2])
+    w = np.stack([np.full(len(o), 1 / math.radians(cfg.bearing_sigma_deg) ** 2),
+                  1 / np.radians(el_sigma_deg) ** 2], axis=1)   # (n, 2)
     wz = 1 / cfg.source_height_sigma_m**2
     p = p0.astype(float).copy()
     for _ in range(iters):
@@ -386,8 +402,8 @@ def _refine(o: np.ndarray, d: np.ndarray, p0: np.ndarray, cfg: SoundMapConfig, i
         az, el = _angles(v)
         r = np.stack([_wrap(az - az_m), el - el_m], axis=1)  # (n, 2)
         j = _jacobian(v)
-        a = np.einsum("nki,k,nkj->ij", j, w, j)
-        g = np.einsum("nki,k,nk->i", j, w, r)
+        a = np.einsum("nki,nk,nkj->ij", j, w, j)
+        g = np.einsum("nki,nk,nk->i", j, w, r)
         a[2, 2] += wz
         g[2] += wz * (p[2] - cfg.source_height_m)
         a += np.eye(3) * 1e-6
@@ -449,13 +465,14 @@ class SoundMap:
         return [s.position[:2] for s in self.sources if s.cls is SourceClass.INTERFERER and s.state is not SourceState.FOUND]
 
     # -- writing ------------------------------------------------------------------------
-    def update(self, evidence: Sequence[BearingEvidence], pose: Pose2D | Sequence[float], time: float
-               ) -> list[tuple[BearingEvidence, int]]:
+    def update(self, evidence: Sequence[BearingEvidence], pose: Pose2D | Sequence[float], time: float,
+               moving: bool = False) -> list[tuple[BearingEvidence, int]]:
         """Fold in one listen's evidence heard at ``pose``; returns (evidence, source id) pairs.
 
         ``evidence``: directions in the ARRAY frame (level array, axes the robot's).
         ``pose``: (x m, y m, yaw rad) of the robot in the world/odometry frame when the audio was captured.
-        ``time``: s, the listen's time (stream time of the evidence)."""
+        ``time``: s, the listen's time (stream time of the evidence). ``moving``: heard while the robot drove (its
+        elevations weigh with ``moving_elevation_sigma_deg`` in the source's position)."""
         x, y, yaw = (float(v) for v in pose)
         if not all(map(math.isfinite, (x, y, yaw, time))):
             raise ValueError(f"pose/time: expected finite numbers, got pose={tuple(pose)!r}, time={time!r}")
@@ -476,7 +493,7 @@ class SoundMap:
         for ev, d in sorted(rays, key=lambda r: -float(r[0].activity)):
             sid = self._associate(ev, origin, d, taken)
             listen = Listen(float(time), tuple(origin), tuple(d), ev.track_id, float(ev.voice_probability),
-                            float(ev.level_db), float(ev.activity))
+                            float(ev.level_db), float(ev.activity), bool(moving))
             if sid is None:
                 src = _Source(self._next_id)
                 self._next_id += 1
@@ -510,7 +527,7 @@ class SoundMap:
         for ev in evidence:
             groups.setdefault(float(ev.time), []).append(ev)
         for t in sorted(groups):
-            out += self.update(groups[t], pose_at(trajectory, t - 0.5 * window_s), t)
+            out += self.update(groups[t], pose_at(trajectory, t - 0.5 * window_s), t, moving=True)
         return out
 
     def set_state(self, source_id: int, state: SourceState, time: float | None = None) -> None:
@@ -632,7 +649,13 @@ class SoundMap:
     def _refit(self, src: _Source) -> None:
         o = np.array([r.origin for r in src.rays])
         d = np.array([r.direction for r in src.rays])
-        src.position, src.covariance, src.inliers = triangulate(o, d, self.config, self._rng)
+        src.position, src.covariance, src.inliers = triangulate(o, d, self.config, self._rng,
+                                                                self._elevation_sigmas(src.rays))
+
+    def _elevation_sigmas(self, rays) -> np.ndarray:
+        """Each ray's elevation noise (deg): standing or heard while driving."""
+        cfg = self.config
+        return np.array([cfg.moving_elevation_sigma_deg if r.moving else cfg.elevation_sigma_deg for r in rays])
 
     def _merge(self) -> None:
         """Join two sources that one position explains: close horizontally (or within each other's
@@ -680,7 +703,7 @@ class SoundMap:
         rays = a.rays + b.rays
         o = np.array([r.origin for r in rays])
         d = np.array([r.direction for r in rays])
-        p, _, inl = triangulate(o, d, cfg, self._rng)
+        p, _, inl = triangulate(o, d, cfg, self._rng, self._elevation_sigmas(rays))
         heard_at = {a.id: o[:len(a.rays), :2], b.id: o[len(a.rays):, :2]}
         for one, other in ((a, b), (b, a)):
             # A source heard along one ray joins another only where their rays cross away from where the other was
