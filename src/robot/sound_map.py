@@ -313,7 +313,7 @@ def _ray_angle(origins: np.ndarray, dirs: np.ndarray, points: np.ndarray) -> np.
 
 
 def triangulate(origins, directions, cfg: SoundMapConfig = SoundMapConfig(),
-                rng: np.random.Generator | None = None, elevation_sigma_deg=None
+                rng: np.random.Generator | None = None, elevation_sigma_deg: np.ndarray | None = None
                 ) -> tuple[np.ndarray, np.ndarray, np.ndarray]:
     """Robust position of one source from rays (world frame): ``(position (3,), covariance (3, 3), inliers (n,))``.
 
