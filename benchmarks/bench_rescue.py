@@ -313,8 +313,8 @@ def main(argv: list[str] | None = None) -> int:
     ap.add_argument("--suite", default=None, help="run a generated suite's split (train | test) instead of the "
                     "shipped scenarios (ssl_sim.suite.write_scenarios)")
     ap.add_argument("--count", type=int, default=None, help="with --suite: only its first COUNT scenarios")
-    ap.add_argument("--first", type=int, default=0, help="with --suite train: start at this index (a range apart "
-                    "from the one a model was fitted on)")
+    ap.add_argument("--first", type=int, default=0, help="with --suite: start at this index (train: a range apart "
+                    "from the one a model was fitted on; test: a part of the fixed split, to run it in parts)")
     ap.add_argument("--results-name", default=None, help="write benchmarks/results/NAME.json (_results.py); '' for "
                     "none (default: rescue, none with --tables-only: re-tabulated rows are not a stored result)")
     ap.add_argument("--tables-only", action="store_true",

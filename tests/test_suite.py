@@ -229,3 +229,14 @@ def test_cli_suite_show_writes_a_rerunnable_file_and_list_prints_the_split(writt
         sound_files("train")
     with pytest.raises(ValueError, match="category"):
         sound_files("dev", "sirens")
+
+
+def test_the_test_split_runs_in_parts_that_join_to_the_whole():
+    whole = suite.indices("test")
+    assert whole == suite.test_indices() and len(whole) == suite.TEST_SIZE
+    assert suite.indices("test", 32) + suite.indices("test", 32, 32) == whole
+    assert suite.indices("test", None, 60) == whole[60:]
+    for count, first in ((65, 0), (8, 60), (None, 64)):
+        with pytest.raises(ValueError, match="test split has 64"):
+            suite.indices("test", count, first)
+    assert suite.indices("train", 3, 200) == [200, 201, 202]

@@ -324,19 +324,20 @@ def scenarios(split: str, count: int | None = None) -> list[Scenario]:
 
 
 def indices(split: str, count: int | None = None, first: int = 0) -> list[int]:
-    """The indices of :func:`scenarios` (test: ``test_indices()[:count]``; train: ``first..first+count-1``,
-    default count TEST_SIZE: a train range apart from the one a model was fitted on is a held-out check)."""
+    """The indices of :func:`scenarios` (test: ``test_indices()[first:first+count]``, a part of the fixed split, to
+    run it in parts; train: ``first..first+count-1``, default count TEST_SIZE: a train range apart from the one a
+    model was fitted on is a held-out check)."""
     _check_split(split)
     if count is not None and (not isinstance(count, int) or count < 1):
         raise ValueError(f"count: expected an integer >= 1, got {count!r}")
     if not isinstance(first, int) or first < 0:
         raise ValueError(f"first: expected an integer >= 0, got {first!r}")
     if split == "test":
-        if first:
-            raise ValueError(f"first: the test split is fixed and taken whole or from its start, got first={first}")
-        if count is not None and count > TEST_SIZE:
-            raise ValueError(f"count: the test split has {TEST_SIZE} scenarios, got {count}")
-        return test_indices()[:count]
+        end = TEST_SIZE if count is None else first + count
+        if end > TEST_SIZE or first >= TEST_SIZE:
+            raise ValueError(f"first, count: the test split has {TEST_SIZE} scenarios, got first={first}, "
+                             f"count={count}")
+        return test_indices()[first:end]
     return list(range(first, first + (count or TEST_SIZE)))
 
 
