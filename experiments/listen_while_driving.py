@@ -99,14 +99,13 @@ def trial(speed: float, ego: bool, seed: int, methods: dict[str, EgoNoiseSuppres
     rows = []
     for label, sup in methods.items():
         cfg = replace(sc.localizer, band_hz=BANDS[label]) if label in BANDS else sc.localizer
-        res = Localizer(cube8(), cfg, ego_noise=sup).locate(block.samples, block.sample_rate,
-                                                                      wheel_speeds=wheels)
+        res = Localizer(cube8(), cfg, ego_noise=sup).locate(block.samples, block.sample_rate, wheel_speeds=wheels)
         row = {"speed": speed, "mode": label, "seed": seed, "moved_m": moved, "detected": int(bool(res.detections)),
-               "az_err_deg": float("nan"), "el_err_deg": float("nan")}  # el signed
+               "az_err_deg": float("nan"), "el_signed_err_deg": float("nan")}
         if res.detections:
             d = res.detections[0]
             row["az_err_deg"] = abs((math.degrees(d.azimuth - az[0]) + 180) % 360 - 180)
-            row["el_err_deg"] = math.degrees(d.elevation - el[0])
+            row["el_signed_err_deg"] = math.degrees(d.elevation - el[0])
         rows.append(row)
     return rows
 
@@ -119,7 +118,8 @@ def main(argv: list[str] | None = None) -> int:
     from tqdm import tqdm
 
     template = calibrate()
-    sups = {audible: {label: suppressor(m, template) for label, e, m in MODES if e == audible} for audible in (False, True)}
+    sups = {audible: {label: suppressor(m, template) for label, e, m in MODES if e == audible}
+            for audible in (False, True)}
     rows = []
     for v, s in tqdm([(v, s) for v in SPEEDS for s in range(args.seeds)], desc="listen while driving", unit="trial"):
         rows += trial(v, False, s, sups[False])
@@ -145,7 +145,7 @@ def main(argv: list[str] | None = None) -> int:
         for label, _, _ in MODES:
             r = [x for x in rows if x["speed"] == v and x["mode"] == label]
             err = np.array([x["az_err_deg"] for x in r if x["detected"]])
-            el = np.array([x["el_err_deg"] for x in r if x["detected"]])
+            el = np.array([x["el_signed_err_deg"] for x in r if x["detected"]])
             cells.append((f"{np.median(err):.1f} / {np.max(err):.1f}" if err.size else "-")
                          + f" ({sum(x['detected'] for x in r)}/{len(r)})")
             el_cells.append(f"{np.mean(el):+.1f} / {np.median(el):+.1f}" if el.size else "-")
