@@ -24,7 +24,7 @@ def test_refitting_the_committed_data_reproduces_the_committed_model(driving):
     committed = json.loads(default_model_path(driving).read_text())
     assert "tools/fit_found_model.py" in committed["provenance"]["fitted_by"]
     assert committed["provenance"]["data"].endswith("assessments_driving.csv.gz" if driving else "assessments.csv.gz")
-    refit = tool.fit(write=False, driving=driving, sign_bounded=committed["provenance"].get("sign_bounded", False))
+    refit = tool.fit(write=False, driving=driving)
     assert refit["bias"] == pytest.approx(committed["bias"], abs=1e-3)
     for name, w in committed["weights"].items():
         assert refit["weights"][name] == pytest.approx(w, abs=1e-3), name
@@ -42,22 +42,6 @@ def test_the_fit_recovers_known_weights_from_synthetic_labels():
     b, w = tool.fit_logistic(X, y, l2=0.0)
     assert b == pytest.approx(b_true, abs=0.08)
     np.testing.assert_allclose(w, w_true, atol=0.08)
-
-
-def test_a_sign_bounded_fit_keeps_each_weight_on_its_priors_side():
-    """Labels whose true weights contradict the prior's signs (seeded): unbounded, the fit follows the data; bounded,
-    a weight with a nonzero prior stops at 0 on its prior's side and one with a zero prior is free."""
-    tool = _tool()
-    rng = np.random.default_rng(11)
-    X = rng.normal(size=(20000, 3))
-    w_true, b_true = np.array([-1.0, 1.0, -1.0]), -0.5
-    y = (rng.random(20000) < 1 / (1 + np.exp(-(b_true + X @ w_true)))).astype(float)
-    prior = np.array([1.0, -1.0, 0.0])
-    _, free = tool.fit_logistic(X, y, l2=0.0, prior=prior)
-    np.testing.assert_allclose(free, w_true, atol=0.08)
-    _, bounded = tool.fit_logistic(X, y, l2=0.0, prior=prior, sign_bounded=True)
-    assert bounded[0] == pytest.approx(0.0, abs=1e-9) and bounded[1] == pytest.approx(0.0, abs=1e-9)
-    assert bounded[2] < -0.5     # free (attenuated: the clamped cues' effect is now unexplained noise)
 
 
 def test_the_committed_model_names_every_cue_and_loads():

@@ -142,14 +142,12 @@ def load_data(path: Path = DATA) -> tuple[np.ndarray, np.ndarray, list[dict]]:
     return X, y, rows
 
 
-def fit_logistic(X: np.ndarray, y: np.ndarray, l2: float = L2, prior: np.ndarray | None = None,
-                 sign_bounded: bool = False) -> tuple[float, np.ndarray]:
+def fit_logistic(X: np.ndarray, y: np.ndarray, l2: float = L2, prior: np.ndarray | None = None
+                 ) -> tuple[float, np.ndarray]:
     """(bias, weights): the maximum a posteriori logistic regression, log-likelihood of ``y`` (0/1) given ``X`` plus
     a Gaussian prior of precision ``l2`` around ``prior`` (zeros if None) on the weights; L-BFGS from the prior
-    (deterministic). ``sign_bounded``: a weight whose prior is nonzero keeps the prior's sign (or is 0), so that a
-    cue cannot count against its physics where the data only reflect the collecting runs' own policy."""
+    (deterministic)."""
     mu = np.zeros(X.shape[1]) if prior is None else np.asarray(prior, float)
-    bounds = [(None, None)] + [(0.0, None) if m > 0 else (None, 0.0) if m < 0 else (None, None) for m in mu]
 
     def loss(theta):
         z = theta[0] + X @ theta[1:]
@@ -160,7 +158,6 @@ def fit_logistic(X: np.ndarray, y: np.ndarray, l2: float = L2, prior: np.ndarray
         return float(np.sum(ll) + 0.5 * l2 * np.sum((theta[1:] - mu) ** 2)), g
 
     res = optimize.minimize(loss, np.concatenate([[0.0], mu]), jac=True, method="L-BFGS-B",
-                            bounds=bounds if sign_bounded else None,
                             options={"maxiter": 10000, "gtol": 1e-9, "ftol": 1e-15})
     return float(res.x[0]), res.x[1:]
 
@@ -193,10 +190,10 @@ def _git_commit() -> str:
         return "unknown"
 
 
-def fit(write: bool = True, path: Path | None = None, driving: bool = False, sign_bounded: bool = False) -> dict:
+def fit(write: bool = True, path: Path | None = None, driving: bool = False) -> dict:
     path = data_path(driving) if path is None else path
     X, y, rows = load_data(path)
-    bias, w = fit_logistic(X, y, L2, np.array([PRIOR[k] for k in NAMES]), sign_bounded)
+    bias, w = fit_logistic(X, y, L2, np.array([PRIOR[k] for k in NAMES]))
     p = 1.0 / (1.0 + np.exp(-(bias + X @ w)))
     confirm, pos_at = confirm_probability(p, X, y, P_FIND)
     scen = sorted({int(r["scenario"]) for r in rows})
@@ -209,7 +206,6 @@ def fit(write: bool = True, path: Path | None = None, driving: bool = False, sig
             "data": str(path.relative_to(ROOT)) if path.is_relative_to(ROOT) else str(path),
             "train_scenarios": f"{scen[0]}..{scen[-1]}" if scen else "",
             "assessments": int(len(y)), "positives": int(y.sum()), "prior_precision": L2, "prior": PRIOR,
-            "sign_bounded": sign_bounded,
             "confirm_probability": round(confirm, 4), "confirm_measured_at_p_find": P_FIND,
             "confirm_listens": int(pos_at.sum()),
             "victims_per_m2": round(victims_per_m2(), 5),
@@ -299,7 +295,6 @@ def main(argv=None) -> None:
     c.add_argument("--p-find", type=float, default=None, help="the collecting behaviour's p_find (default its own)")
     f = sub.add_parser("fit")
     f.add_argument("--dry-run", action="store_true", help="print the fit, write nothing")
-    f.add_argument("--sign-bounded", action="store_true", help="each weight keeps its prior's sign (fit_logistic)")
     k = sub.add_parser("curve")
     k.add_argument("--first", type=int, default=200)
     k.add_argument("--count", type=int, default=24)
@@ -312,7 +307,7 @@ def main(argv=None) -> None:
     if a.cmd == "collect":
         collect(a.first, a.count, a.workers, a.p_find, a.driving)
     elif a.cmd == "fit":
-        fit(write=not a.dry_run, driving=a.driving, sign_bounded=a.sign_bounded)
+        fit(write=not a.dry_run, driving=a.driving)
     else:
         curve(a.first, a.count, a.p, a.workers, a.driving)
 
