@@ -88,10 +88,10 @@ class SoundMapConfig:
     bearing_sigma_deg: float = 5.0         # azimuth noise of one listen (SRP-PHAT in RT60 0.6 s rubble: median
     #                                        errors 2-5 deg in the shipped runs' listens)
     elevation_sigma_deg: float = 8.0       # elevation is worse on the cube (floor reflections)
-    # A bearing heard while driving: the ego-noise template leaves mostly the band below 3 kHz, whose broad elevation
-    # lobe takes in the floor reflection and reads low by a bias shared by the drive's windows (-2.9 / -2.4 deg mean
-    # at 1-2 / 2-3 m against -1.0 / -0.4 standing, docs/design/ego_noise.md), which a dozen such rays do not average
-    # away. Three times the standing noise: nine of them weigh in elevation as one standing listen, so the source's
+    # A bearing heard while driving: the ego-noise template leaves mostly the band below 3 kHz, where the elevation
+    # lobe is broad and reads low (likely taking in the floor reflection) by a bias shared by the drive's windows
+    # (-2.9 / -2.4 deg mean at 1-2 / 2-3 m against -1.0 / -0.4 standing, docs/design/ego_noise.md), which a dozen
+    # such rays do not average away. Three times the standing noise: nine of them weigh in elevation as one standing listen, so the source's
     # range comes from the standing listens and the drive's azimuths.
     moving_elevation_sigma_deg: float = 24.0
     inlier_deg: float = 12.0               # RANSAC: a ray this close to the hypothesis supports it
